@@ -1,0 +1,3 @@
+from orbitcal.cli import main
+
+raise SystemExit(main())
