@@ -41,7 +41,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"orbitcal {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMAND_MODULES:
-        module = importlib.import_module(f"orbitcal.cli.{name}")
+        try:
+            module = importlib.import_module(f"orbitcal.cli.{name}")
+        except ModuleNotFoundError as exc:
+            # Only while a command is being written; tests/test_cli_surface.py requires every one.
+            if exc.name != f"orbitcal.cli.{name}":
+                raise
+            continue
         module.register(sub)
     return parser
 
