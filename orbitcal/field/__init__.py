@@ -1,0 +1,119 @@
+"""Reference geomagnetic field models, evaluated per sample.
+
+``get_field(name)`` returns a :class:`FieldModel`; names combine with ``+``:
+
+============================  =====================================================
+``IGRF-14``, ``IGRF-13``      IGRF generations (coefficients from ``ppigrf``)
+``CHAOS-8.1``                 CHAOS-8.1 core field, n ≤ 20, time-dependent
+``CHAOS-8.1-static``          CHAOS-8.1 lithospheric field, n = 21..185
+``LCS-1``, ``MF7``            lithospheric models
+``RC``                        magnetospheric ring-current field driven by the RC index
+============================  =====================================================
+
+e.g. ``"CHAOS-8.1+CHAOS-8.1-static+RC"`` or ``"IGRF-14+LCS-1"``. All models return geocentric
+North, East, Centre (down) components [nT]; dates outside a model's validity raise
+:class:`FieldRangeError`.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+from numpy.typing import NDArray
+
+from orbitcal.field._base import FieldModel, FieldRangeError, SphericalHarmonicModel
+from orbitcal.field.chaos import chaos_core
+from orbitcal.field.crust import CRUSTAL_MODELS, crustal_field
+from orbitcal.field.external import RingCurrentField, ring_current_field
+from orbitcal.field.igrf import IGRF_GENERATIONS, igrf
+
+__all__ = [
+    "DEFAULT_FIELD",
+    "FIELD_NAMES",
+    "CompositeField",
+    "FieldModel",
+    "FieldRangeError",
+    "RingCurrentField",
+    "SphericalHarmonicModel",
+    "get_field",
+]
+
+#: The reference field when none is named (CONTRACT section 2).
+DEFAULT_FIELD = "IGRF-14"
+
+#: Every model name that ``get_field`` accepts as a term.
+FIELD_NAMES: tuple[str, ...] = (*IGRF_GENERATIONS, "CHAOS-8.1", *CRUSTAL_MODELS, "RC")
+
+
+class CompositeField:
+    """Sum of several field models; its name joins theirs with ``+``."""
+
+    def __init__(self, parts: tuple[FieldModel, ...]) -> None:
+        if not parts:
+            raise ValueError("a composite field needs at least one model")
+        self.parts = parts
+
+    @property
+    def name(self) -> str:
+        return "+".join(p.name for p in self.parts)
+
+    def b_nec_nt(
+        self,
+        t_utc_s: NDArray[np.float64],
+        radius_km: NDArray[np.float64],
+        colat_deg: NDArray[np.float64],
+        lon_deg: NDArray[np.float64],
+    ) -> NDArray[np.float64]:
+        """Sum of the parts' fields, geocentric NEC [nT] (see :class:`FieldModel`)."""
+        total = self.parts[0].b_nec_nt(t_utc_s, radius_km, colat_deg, lon_deg)
+        for part in self.parts[1:]:
+            total = total + part.b_nec_nt(t_utc_s, radius_km, colat_deg, lon_deg)
+        return total
+
+    def __repr__(self) -> str:
+        return f"CompositeField({self.name!r})"
+
+
+def _single(name: str) -> FieldModel:
+    if name in IGRF_GENERATIONS:
+        return igrf(name)
+    if name == "CHAOS-8.1":
+        return chaos_core(name)
+    if name in CRUSTAL_MODELS:
+        return crustal_field(name)
+    if name == "RC":
+        return ring_current_field()
+    hint = ""
+    if name.upper() == "IGRF":
+        hint = " (name the generation, e.g. IGRF-14)"
+    raise ValueError(f"unknown field model {name!r}{hint}; available: {', '.join(FIELD_NAMES)}")
+
+
+@lru_cache(maxsize=32)
+def get_field(name: str = DEFAULT_FIELD) -> FieldModel:
+    """The field model called ``name``; terms combine with ``+`` (e.g. ``"CHAOS-8.1+LCS-1+RC"``).
+
+    Parameters
+    ----------
+    name : str
+        Model name(s); spaces around ``+`` are ignored, case matters.
+
+    Returns
+    -------
+    FieldModel
+        Loaded once per name and cached; ``.name`` is the full canonical name.
+
+    Raises
+    ------
+    ValueError
+        For an unknown or repeated term.
+    """
+    terms = tuple(t.strip() for t in name.split("+"))
+    if any(not t for t in terms):
+        raise ValueError(f"empty term in field name {name!r}")
+    if len(set(terms)) != len(terms):
+        raise ValueError(f"field name {name!r} repeats a term")
+    if len(terms) == 1:
+        return _single(terms[0])
+    return CompositeField(tuple(_single(t) for t in terms))

@@ -1,0 +1,51 @@
+"""Static lithospheric (crustal) field models shipped with orbitcal.
+
+- ``CHAOS-8.1-static``: CHAOS-8.1 lithospheric part, n = 21..185 (DTU Space; Finlay et al. 2020).
+- ``LCS-1``: Olsen, Ravat, Finlay & Kother (2017), "LCS-1: a high-resolution global model of the
+  lithospheric magnetic field derived from CHAMP and Swarm satellite observations", GJI 211(3),
+  1461–1477; n = 1..185.
+- ``MF7``: Maus (2010) and co-workers, NGDC/CIRES MF7, n = 16..133.
+
+Evaluation cost grows as nmax²: about 100× a degree-13 IGRF per point at n = 185.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+from orbitcal.field._base import SphericalHarmonicModel
+from orbitcal.field.chaos import field_data_path
+from orbitcal.field.shc import read_shc
+
+__all__ = ["CRUSTAL_MODELS", "crustal_field"]
+
+#: Crustal model names and their .shc files in ``orbitcal/field/data/``.
+CRUSTAL_MODELS: dict[str, str] = {
+    "CHAOS-8.1-static": "CHAOS-8.1_static.shc",
+    "LCS-1": "LCS-1.shc",
+    "MF7": "MF7.shc",
+}
+
+
+@lru_cache(maxsize=4)
+def crustal_field(name: str) -> SphericalHarmonicModel:
+    """A static crustal model by name (see :data:`CRUSTAL_MODELS`), loaded once."""
+    try:
+        filename = CRUSTAL_MODELS[name]
+    except KeyError:
+        raise ValueError(
+            f"unknown crustal model {name!r}; available: {', '.join(CRUSTAL_MODELS)}"
+        ) from None
+    shc = read_shc(field_data_path(filename))
+    if shc.coeffs_flat.shape[0] != 1:
+        raise ValueError(f"{name}: expected a single static snapshot")
+    return SphericalHarmonicModel(
+        name,
+        nmin=shc.nmin,
+        nmax=shc.nmax,
+        breaks_mjd2000=np.array([0.0, 0.0]),
+        coeffs_pp_flat=shc.coeffs_flat[None, :, :],
+        static=True,
+    )

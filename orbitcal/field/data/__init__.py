@@ -1,0 +1,1 @@
+"""Model coefficient files (see README.md here for provenance)."""
