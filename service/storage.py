@@ -60,6 +60,8 @@ class Spacecraft(Base):
     tle: Mapped[str | None] = mapped_column(sa.Text, nullable=True)
     omm: Mapped[dict[str, Any] | None] = mapped_column(sa.JSON, nullable=True)
     attitude_frame: Mapped[str] = mapped_column(sa.String(8), nullable=False, default="GCRS")
+    #: Per-spacecraft overrides of the retraining schedule (cadence_s, min_new_samples, window_s).
+    schedule: Mapped[dict[str, Any] | None] = mapped_column(sa.JSON, nullable=True)
     created_at: Mapped[float] = mapped_column(sa.Float, nullable=False)
     #: Samples stored so far (maintained in the ingest transaction).
     sample_count: Mapped[int] = mapped_column(sa.BigInteger, nullable=False, default=0)

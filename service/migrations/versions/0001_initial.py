@@ -24,6 +24,7 @@ def upgrade() -> None:
         sa.Column("tle", sa.Text, nullable=True),
         sa.Column("omm", sa.JSON, nullable=True),
         sa.Column("attitude_frame", sa.String(8), nullable=False),
+        sa.Column("schedule", sa.JSON, nullable=True),
         sa.Column("created_at", sa.Float, nullable=False),
         sa.Column("sample_count", sa.BigInteger, nullable=False),
         sa.Column("samples_at_last_job", sa.BigInteger, nullable=False),
@@ -42,8 +43,17 @@ def upgrade() -> None:
         *[
             sa.Column(c, sa.Float, nullable=True)
             for c in (
-                "q_w", "q_x", "q_y", "q_z", "r_x", "r_y", "r_z",
-                "temperature", "mtq_x", "mtq_y", "mtq_z",
+                "q_w",
+                "q_x",
+                "q_y",
+                "q_z",
+                "r_x",
+                "r_y",
+                "r_z",
+                "temperature",
+                "mtq_x",
+                "mtq_y",
+                "mtq_z",
             )
         ],  # fmt: skip
         sa.Column("hk", sa.Text, nullable=True),

@@ -1,0 +1,203 @@
+"""The application factory: ``create_app(settings)`` builds a FastAPI app; its lifespan opens the
+database (running migrations), the job runner and the scheduler. Nothing happens at import time.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import AsyncIterator, Callable
+from contextlib import asynccontextmanager
+from typing import Any
+
+import sqlalchemy as sa
+from fastapi import FastAPI, HTTPException, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from starlette.types import ASGIApp, Receive, Scope, Send
+
+import orbitcal
+from service.auth import is_loopback
+from service.jobs import FitFunction, InlineRunner, JobRunner, recover_interrupted
+from service.logs import configure_logging, redact_url
+from service.metrics import Metrics
+from service.routes import calibrations, dashboard, jobs, keys, ops, spacecraft, telemetry
+from service.scheduler import FleetScheduler
+from service.settings import Settings
+from service.storage import hash_key, make_engine, upgrade
+
+__all__ = ["create_app"]
+
+log = logging.getLogger("orbitcal.service")
+
+
+class BodyLimit:
+    """413 before reading a body whose declared length exceeds the limit (ASGI middleware)."""
+
+    def __init__(self, app: ASGIApp, limit: int) -> None:
+        self.app = app
+        self.limit = limit
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] == "http":
+            for name, value in scope.get("headers", []):
+                if name == b"content-length":
+                    if not value.isdigit() or int(value) > self.limit:
+                        response = JSONResponse(
+                            {
+                                "detail": f"body of {value.decode()} bytes exceeds {self.limit}",
+                                "errors": [],
+                            },
+                            status_code=413,
+                        )
+                        await response(scope, receive, send)
+                        return
+                    break
+        await self.app(scope, receive, send)
+
+
+def _error(
+    status: int,
+    detail: str,
+    errors: list[dict[str, Any]] | None = None,
+    headers: dict[str, str] | None = None,
+) -> JSONResponse:
+    return JSONResponse(
+        {"detail": detail, "errors": errors or []}, status_code=status, headers=headers
+    )
+
+
+def create_app(
+    settings: Settings | None = None,
+    *,
+    fit: FitFunction | None = None,
+    runner: Callable[[Any, Settings], JobRunner] | None = None,
+) -> FastAPI:
+    """Build the service.
+
+    Parameters
+    ----------
+    settings
+        Defaults to ``Settings()`` (the ``ORBITCAL_*`` environment).
+    fit
+        Replaces the calibration fit of inline jobs (tests inject a deliberately worse fitter).
+    runner
+        ``runner(engine, settings) -> JobRunner``; default: inline thread pool, or Celery when
+        ``settings.job_backend == "celery"``.
+    """
+    settings = settings or Settings()
+    configure_logging(settings.log_level)
+    if not settings.auth and not is_loopback(settings.bind_host):
+        raise ValueError(
+            f"refusing to run without authentication on {settings.bind_host}: "
+            "bind to 127.0.0.1 or set ORBITCAL_ADMIN_KEY and leave ORBITCAL_AUTH on"
+        )
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        engine = make_engine(settings.database_url, sqlite_synchronous=settings.sqlite_synchronous)
+        upgrade(engine)
+        metrics = Metrics(engine)
+        app.state.engine = engine
+        app.state.metrics = metrics
+
+        def on_done(status: str, seconds: float) -> None:
+            metrics.retrain_seconds.labels(status).observe(seconds)
+
+        job_runner: JobRunner
+        if runner is not None:
+            job_runner = runner(engine, settings)
+        elif settings.job_backend == "celery":
+            from service.celery_app import CeleryRunner
+
+            job_runner = CeleryRunner(settings)
+        else:
+            job_runner = InlineRunner(engine, settings, fit=fit, on_done=on_done)
+        app.state.runner = job_runner
+        if settings.job_backend == "inline" and runner is None:
+            for job_id in recover_interrupted(engine):
+                job_runner.submit(job_id)
+        scheduler = FleetScheduler(engine, settings, job_runner)
+        app.state.scheduler = scheduler
+        if settings.scheduler:
+            scheduler.start()
+        log.info(
+            "service started",
+            extra={
+                "database": redact_url(settings.database_url),
+                "job_backend": settings.job_backend,
+                "scheduler": settings.scheduler,
+                "auth": settings.auth,
+            },
+        )
+        try:
+            yield
+        finally:
+            scheduler.shutdown()
+            job_runner.shutdown()
+            engine.dispose()
+
+    app = FastAPI(
+        title="orbitcal",
+        version=orbitcal.__version__,
+        summary="On-orbit magnetometer calibration: telemetry ingest, retraining, calibrations.",
+        lifespan=lifespan,
+    )
+    app.state.settings = settings
+    app.state.admin_key_hash = (
+        hash_key(settings.admin_key.get_secret_value()) if settings.admin_key else None
+    )
+    app.state.diagnosis_cache = {}
+    if not settings.auth:
+        log.warning(
+            "AUTHENTICATION IS OFF: every caller on %s is admin. Only for local use.",
+            settings.bind_host,
+        )
+    elif app.state.admin_key_hash is None:
+        log.warning("no ORBITCAL_ADMIN_KEY set: no key can be created until one is")
+
+    app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
+
+    @app.exception_handler(HTTPException)
+    async def _http_error(_request: Request, exc: HTTPException) -> JSONResponse:
+        field = (exc.headers or {}).get("X-Error-Field")
+        errors = [{"field": field, "reason": exc.detail}] if field else []
+        return _error(exc.status_code, str(exc.detail), errors, exc.headers)
+
+    @app.exception_handler(RequestValidationError)
+    async def _validation_error(_request: Request, exc: RequestValidationError) -> JSONResponse:
+        errors = [
+            {"field": ".".join(str(p) for p in e.get("loc", ())), "reason": e.get("msg", "")}
+            for e in exc.errors()
+        ]
+        return _error(
+            422,
+            "invalid request: " + "; ".join(f"{e['field']}: {e['reason']}" for e in errors),
+            errors,
+        )
+
+    @app.exception_handler(sa.exc.OperationalError)
+    async def _db_unavailable(_request: Request, exc: sa.exc.OperationalError) -> JSONResponse:
+        log.warning("database unavailable", extra={"error": type(exc.orig).__name__})
+        return _error(
+            503,
+            "database unavailable, nothing was stored; retry later",
+            headers={"Retry-After": "5"},
+        )
+
+    @app.exception_handler(sa.exc.InterfaceError)
+    async def _db_interface(_request: Request, exc: sa.exc.InterfaceError) -> JSONResponse:
+        log.warning("database unavailable", extra={"error": type(exc.orig).__name__})
+        return _error(
+            503,
+            "database unavailable, nothing was stored; retry later",
+            headers={"Retry-After": "5"},
+        )
+
+    @app.exception_handler(Exception)
+    async def _unexpected(_request: Request, exc: Exception) -> JSONResponse:
+        log.error("unexpected error", exc_info=exc)
+        return _error(500, "internal error (logged)")
+
+    for module in (ops, spacecraft, telemetry, calibrations, jobs, keys, dashboard):
+        app.include_router(module.router)
+    return app

@@ -1,0 +1,126 @@
+"""API keys with scopes: ``admin``, ``ingest:<spacecraft|*>``, ``read:<spacecraft|*>``.
+
+Keys are 256-bit random tokens; only their sha256 is stored. The bootstrap admin key comes from
+``ORBITCAL_ADMIN_KEY`` and is compared in constant time, never stored. Authentication can be turned
+off (``ORBITCAL_AUTH=false``) only when the server is bound to a loopback address.
+"""
+
+from __future__ import annotations
+
+import hmac
+import ipaddress
+import re
+import secrets
+import time
+from dataclasses import dataclass
+from typing import Annotated
+
+import sqlalchemy as sa
+from fastapi import Depends, Header, HTTPException, Request
+
+from service.storage import ApiKey, hash_key, read_tx, write_tx
+
+__all__ = [
+    "SCOPE_RE",
+    "Principal",
+    "create_key",
+    "is_loopback",
+    "principal",
+    "require_admin",
+    "require_scope",
+]
+
+SCOPE_RE = re.compile(r"^(admin|(ingest|read):(\*|[A-Za-z0-9_.\-]{1,64}))$")
+KEY_PREFIX = "ock_"
+
+
+@dataclass(frozen=True)
+class Principal:
+    """Who is calling: the key's name and scopes (``anonymous`` with every scope when auth is off)."""
+
+    name: str
+    scopes: frozenset[str]
+
+    def allows(self, action: str, spacecraft: str | None) -> bool:
+        if "admin" in self.scopes:
+            return True
+        if action == "admin":
+            return False
+        if f"{action}:*" in self.scopes:
+            return True
+        return spacecraft is not None and f"{action}:{spacecraft}" in self.scopes
+
+
+def is_loopback(host: str) -> bool:
+    if host in ("localhost", ""):
+        return host == "localhost"
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def create_key(request: Request, name: str, scopes: list[str]) -> tuple[str, str]:
+    """Create a key; return ``(key, prefix)``. The key is shown once and never stored."""
+    key = KEY_PREFIX + secrets.token_urlsafe(32)
+    prefix = key[:12]
+    with write_tx(request.app.state.engine) as conn:
+        conn.execute(
+            sa.insert(ApiKey).values(
+                key_hash=hash_key(key),
+                prefix=prefix,
+                name=name,
+                scopes=sorted(set(scopes)),
+                created_at=time.time(),
+                revoked=False,
+            )
+        )
+    return key, prefix
+
+
+def _unauthorised(reason: str) -> HTTPException:
+    return HTTPException(status_code=401, detail=reason, headers={"WWW-Authenticate": "X-API-Key"})
+
+
+def principal(
+    request: Request,
+    x_api_key: Annotated[str | None, Header(description="API key (see docs/service.md)")] = None,
+) -> Principal:
+    """Resolve the caller from ``X-API-Key`` (dependency)."""
+    settings = request.app.state.settings
+    if not settings.auth:
+        return Principal("anonymous (authentication off)", frozenset({"admin"}))
+    if not x_api_key:
+        raise _unauthorised("missing X-API-Key header")
+    presented = hash_key(x_api_key)
+    admin_hash: str | None = request.app.state.admin_key_hash
+    if admin_hash is not None and hmac.compare_digest(presented, admin_hash):
+        return Principal("bootstrap admin", frozenset({"admin"}))
+    with read_tx(request.app.state.engine) as conn:
+        row = conn.execute(
+            sa.select(ApiKey.key_hash, ApiKey.name, ApiKey.scopes, ApiKey.revoked).where(
+                ApiKey.key_hash == presented
+            )
+        ).first()
+    if row is None or row.revoked or not hmac.compare_digest(row.key_hash, presented):
+        raise _unauthorised("unknown or revoked API key")
+    return Principal(row.name, frozenset(row.scopes))
+
+
+def require_scope(action: str) -> object:
+    """Dependency factory: the caller needs ``action`` on the path's ``spacecraft_id``."""
+
+    def dependency(request: Request, who: Annotated[Principal, Depends(principal)]) -> Principal:
+        spacecraft = request.path_params.get("spacecraft_id")
+        if not who.allows(action, spacecraft):
+            target = f"{action}:{spacecraft}" if spacecraft else action
+            raise HTTPException(status_code=403, detail=f"this key lacks the scope {target}")
+        return who
+
+    return Depends(dependency)
+
+
+def require_admin(who: Annotated[Principal, Depends(principal)]) -> Principal:
+    if not who.allows("admin", None):
+        raise HTTPException(status_code=403, detail="this key lacks the scope admin")
+    return who

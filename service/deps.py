@@ -1,0 +1,46 @@
+"""Shared route dependencies and helpers."""
+
+from __future__ import annotations
+
+import time
+from typing import Annotated, Any
+
+import sqlalchemy as sa
+from fastapi import Depends, HTTPException, Request
+from sqlalchemy.engine import Connection, Engine
+
+from service.settings import Settings
+from service.storage import Spacecraft
+
+__all__ = ["EngineDep", "SettingsDep", "get_spacecraft", "iso", "iso_or_none"]
+
+
+def _engine(request: Request) -> Engine:
+    return request.app.state.engine  # type: ignore[no-any-return]
+
+
+def _settings(request: Request) -> Settings:
+    return request.app.state.settings  # type: ignore[no-any-return]
+
+
+EngineDep = Annotated[Engine, Depends(_engine)]
+SettingsDep = Annotated[Settings, Depends(_settings)]
+
+
+def iso(t: float) -> str:
+    """POSIX seconds → ISO-8601 UTC with ``Z`` (millisecond precision)."""
+    whole = int(t // 1)
+    return (
+        time.strftime("%Y-%m-%dT%H:%M:%S", time.gmtime(whole)) + f".{int((t - whole) * 1000):03d}Z"
+    )
+
+
+def iso_or_none(t: float | None) -> str | None:
+    return None if t is None else iso(t)
+
+
+def get_spacecraft(conn: Connection, spacecraft_id: str) -> Any:
+    row = conn.execute(sa.select(Spacecraft).where(Spacecraft.id == spacecraft_id)).first()
+    if row is None:
+        raise HTTPException(status_code=404, detail=f"unknown spacecraft {spacecraft_id!r}")
+    return row

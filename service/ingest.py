@@ -1,0 +1,139 @@
+"""Ingest: request body (any supported content type) → validated columns → database rows."""
+
+from __future__ import annotations
+
+import zlib
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import orjson
+import pandas as pd
+
+from orbitcal import ccsds
+from orbitcal.telemetry import RowError, Telemetry, TelemetryError, from_frame, parse_telemetry
+
+__all__ = [
+    "CCSDS_MEDIA_TYPE",
+    "MEDIA_TYPES",
+    "BodyTooLarge",
+    "ParsedUpload",
+    "decompress",
+    "parse_body",
+    "telemetry_to_rows",
+]
+
+#: Media type of a stream of magnetometer space packets (layout: ``docs/ccsds.md``).
+CCSDS_MEDIA_TYPE = "application/vnd.ccsds.space-packet"
+
+#: Accepted ``Content-Type`` → format name.
+MEDIA_TYPES: dict[str, str] = {
+    "text/csv": "csv",
+    "application/x-ndjson": "ndjson",
+    "application/json": "json",
+    "application/vnd.apache.parquet": "parquet",
+    CCSDS_MEDIA_TYPE: "ccsds",
+}
+
+
+class BodyTooLarge(ValueError):
+    """The (decompressed) body exceeds the configured limit."""
+
+
+@dataclass(frozen=True)
+class ParsedUpload:
+    telemetry: Telemetry
+    rejected: list[RowError]
+
+
+def decompress(body: bytes, encoding: str, *, limit: int) -> bytes:
+    """Undo ``Content-Encoding: gzip|deflate`` without ever holding more than ``limit`` bytes."""
+    encoding = encoding.strip().lower()
+    if encoding in ("", "identity"):
+        return body
+    if encoding not in ("gzip", "deflate"):
+        raise ValueError(f"Content-Encoding {encoding!r} is not supported; use gzip or none")
+    wbits = 16 + zlib.MAX_WBITS if encoding == "gzip" else zlib.MAX_WBITS
+    d = zlib.decompressobj(wbits)
+    try:
+        out = d.decompress(body, limit + 1)
+    except zlib.error as exc:
+        raise ValueError(f"body is not valid {encoding}: {exc}") from None
+    if len(out) > limit or d.unconsumed_tail:
+        raise BodyTooLarge(f"decompressed body exceeds {limit} bytes")
+    return out
+
+
+def _packets_to_frame(decoded: ccsds.DecodedPackets) -> pd.DataFrame:
+    cols: dict[str, Any] = {"time": decoded.t_utc_s}
+    for i, c in enumerate(("b_x", "b_y", "b_z")):
+        cols[c] = decoded.b_raw_nt[:, i]
+    # NaN in an optional group of every packet means "not available": the column is left out.
+    if not np.isnan(decoded.q_wxyz).all():
+        for i, c in enumerate(("q_w", "q_x", "q_y", "q_z")):
+            cols[c] = decoded.q_wxyz[:, i]
+    if not np.isnan(decoded.temperature_c).all():
+        cols["temperature"] = decoded.temperature_c
+    if not np.isnan(decoded.mtq_am2).all():
+        for i, c in enumerate(("mtq_x", "mtq_y", "mtq_z")):
+            cols[c] = decoded.mtq_am2[:, i]
+    return pd.DataFrame(cols)
+
+
+def parse_body(body: bytes, *, fmt: str, time_scale: str, apid: int | None = None) -> ParsedUpload:
+    """Validate an upload; row numbers in ``rejected`` are 0-based rows (packets for CCSDS).
+
+    Raises ``TelemetryError`` / ``ccsds.PacketError`` when nothing can be read at all.
+    """
+    if fmt != "ccsds":
+        result = parse_telemetry(body, fmt=fmt, time_scale=time_scale)  # type: ignore[arg-type]
+        return ParsedUpload(result.telemetry, list(result.rejected))
+    if time_scale.upper() != "UTC":
+        raise TelemetryError("CCSDS packets carry TAI (CUC) times: leave time_scale out or use UTC")
+    decoded = ccsds.decode_packets(body, apid=apid)
+    rejected = [RowError(i, reason) for i, reason in decoded.rejected]
+    if len(decoded) == 0:
+        return ParsedUpload(Telemetry(t_utc_s=np.empty(0), b_raw_nt=np.empty((0, 3))), rejected)
+    result = from_frame(_packets_to_frame(decoded), time_scale="UTC")
+    rejected += [RowError(int(decoded.index[e.row]), e.reason) for e in result.rejected]
+    rejected.sort(key=lambda e: e.row)
+    return ParsedUpload(result.telemetry, rejected)
+
+
+def _col(a: np.ndarray | None, n: int) -> list[Any]:
+    return [None] * n if a is None else a.tolist()
+
+
+def telemetry_to_rows(spacecraft_pk: int, tel: Telemetry) -> list[tuple[Any, ...]]:
+    """Rows ``(spacecraft_pk, t_utc_us, *SAMPLE_COLUMNS, hk)`` for :func:`insert_samples`."""
+    n = int(tel.t_utc_s.shape[0])
+    if n == 0:
+        return []
+    t_us = np.rint(tel.t_utc_s * 1e6).astype(np.int64).tolist()
+    b = tel.b_raw_nt
+    q = tel.q_wxyz
+    r = tel.r_itrs_km
+    mtq = tel.mtq_am2
+    columns: list[list[Any]] = [
+        [spacecraft_pk] * n,
+        t_us,
+        b[:, 0].tolist(),
+        b[:, 1].tolist(),
+        b[:, 2].tolist(),
+        *(_col(None if q is None else q[:, i], n) for i in range(4)),
+        *(_col(None if r is None else r[:, i], n) for i in range(3)),
+        _col(tel.temperature_c, n),
+        *(_col(None if mtq is None else mtq[:, i], n) for i in range(3)),
+    ]
+    if tel.hk:
+        names = list(tel.hk)
+        values = [tel.hk[k].tolist() for k in names]
+        columns.append(
+            [
+                orjson.dumps(dict(zip(names, vs, strict=True))).decode()
+                for vs in zip(*values, strict=True)
+            ]
+        )
+    else:
+        columns.append([None] * n)
+    return list(zip(*columns, strict=True))

@@ -1,0 +1,121 @@
+"""Prometheus metrics: in-process counters plus gauges read from the database at scrape time."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Any
+
+import sqlalchemy as sa
+from prometheus_client import CollectorRegistry, Counter, Histogram
+from prometheus_client.core import GaugeMetricFamily
+from prometheus_client.registry import Collector
+from sqlalchemy.engine import Engine
+
+from service.storage import Calibration, Job, Spacecraft, read_tx
+
+__all__ = ["Metrics"]
+
+
+class _DatabaseCollector(Collector):
+    """Queue depth, in-service held-out RMS and last retrain duration per spacecraft."""
+
+    def __init__(self, engine: Engine) -> None:
+        self.engine = engine
+
+    def collect(self) -> Iterator[Any]:
+        queue = GaugeMetricFamily(
+            "orbitcal_jobs", "Retraining jobs by status (queued = queue depth)", labels=["status"]
+        )
+        rms = GaugeMetricFamily(
+            "orbitcal_holdout_rms_nt",
+            "Held-out RMS of the calibration in service [nT]",
+            labels=["spacecraft"],
+        )
+        last = GaugeMetricFamily(
+            "orbitcal_last_retrain_duration_seconds",
+            "Duration of the last finished retraining job [s]",
+            labels=["spacecraft"],
+        )
+        samples = GaugeMetricFamily(
+            "orbitcal_samples_stored", "Samples stored", labels=["spacecraft"]
+        )
+        try:
+            with read_tx(self.engine) as conn:
+                counts = dict(
+                    conn.execute(sa.select(Job.status, sa.func.count()).group_by(Job.status)).all()
+                )
+                for status in ("queued", "running", "succeeded", "failed"):
+                    queue.add_metric([status], float(counts.get(status, 0)))
+                for sc, value in conn.execute(
+                    sa.select(Spacecraft.id, Calibration.holdout_rms_nt)
+                    .join(Calibration, Calibration.spacecraft_pk == Spacecraft.pk)
+                    .where(Calibration.status == "in_service")
+                ).all():
+                    if value is not None:
+                        rms.add_metric([sc], float(value))
+                for sc, n in conn.execute(sa.select(Spacecraft.id, Spacecraft.sample_count)).all():
+                    samples.add_metric([sc], float(n))
+                latest = (
+                    sa.select(Job.spacecraft_pk, sa.func.max(Job.finished_at).label("finished_at"))
+                    .where(Job.finished_at.is_not(None))
+                    .group_by(Job.spacecraft_pk)
+                    .subquery()
+                )
+                for sc, started, finished in conn.execute(
+                    sa.select(Spacecraft.id, Job.started_at, Job.finished_at)
+                    .join(Job, Job.spacecraft_pk == Spacecraft.pk)
+                    .join(
+                        latest,
+                        sa.and_(
+                            latest.c.spacecraft_pk == Job.spacecraft_pk,
+                            latest.c.finished_at == Job.finished_at,
+                        ),
+                    )
+                ).all():
+                    if started is not None and finished is not None:
+                        last.add_metric([sc], float(finished - started))
+        except sa.exc.SQLAlchemyError:
+            return
+        yield queue
+        yield rms
+        yield last
+        yield samples
+
+
+class Metrics:
+    """One registry per app (no global state)."""
+
+    def __init__(self, engine: Engine) -> None:
+        self.registry = CollectorRegistry()
+        self.ingest_samples = Counter(
+            "orbitcal_ingest_samples",
+            "Samples accepted (new) by ingest; rate() gives the ingest rate",
+            ["format"],
+            registry=self.registry,
+        )
+        self.ingest_duplicates = Counter(
+            "orbitcal_ingest_duplicates",
+            "Samples already stored (unchanged)",
+            ["format"],
+            registry=self.registry,
+        )
+        self.ingest_rejected = Counter(
+            "orbitcal_ingest_rejected_rows",
+            "Rows rejected by validation",
+            ["format"],
+            registry=self.registry,
+        )
+        self.ingest_seconds = Histogram(
+            "orbitcal_ingest_request_seconds",
+            "Time to parse, validate and commit one upload",
+            ["format"],
+            registry=self.registry,
+        )
+        self.retrain_seconds = Histogram(
+            "orbitcal_retrain_duration_seconds",
+            "Retraining job duration in this process",
+            ["outcome"],
+            buckets=(0.1, 0.25, 0.5, 1, 2.5, 5, 10, 30, 60, 120, 300),
+            registry=self.registry,
+        )
+        self.registry.register(_DatabaseCollector(engine))

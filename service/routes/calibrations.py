@@ -1,0 +1,196 @@
+"""Calibrations: retrain now, the version in service, every version, residuals, diagnosis."""
+
+from __future__ import annotations
+
+import threading
+from typing import Annotated, Any
+
+import numpy as np
+import orjson
+import sqlalchemy as sa
+from fastapi import APIRouter, HTTPException, Query, Request, Response
+from fastapi.concurrency import run_in_threadpool
+
+from service import science
+from service.auth import Principal, require_scope
+from service.deps import EngineDep, SettingsDep, get_spacecraft, iso
+from service.jobs import create_job, samples_to_telemetry
+from service.schemas import (
+    CalibrationDocument,
+    CalibrationVersionPublic,
+    ErrorPublic,
+    JobAccepted,
+    RetrainIn,
+)
+from service.storage import Calibration, read_samples, read_tx
+
+__all__ = ["router"]
+
+router = APIRouter(prefix="/v1/spacecraft", tags=["calibrations"])
+_ERRORS: dict[int | str, dict[str, Any]] = {
+    401: {"model": ErrorPublic},
+    403: {"model": ErrorPublic},
+    404: {"model": ErrorPublic},
+}
+
+
+@router.post("/{spacecraft_id}/calibrations", status_code=202, responses=_ERRORS)
+def retrain_now(
+    spacecraft_id: str,
+    request: Request,
+    engine: EngineDep,
+    settings: SettingsDep,
+    _who: Annotated[Principal, require_scope("ingest")],
+    body: RetrainIn | None = None,
+) -> JobAccepted:
+    """Queue a retraining; answers the live job's id if one is already queued or running."""
+    with read_tx(engine) as conn:
+        sc = get_spacecraft(conn, spacecraft_id)
+    params = {} if body is None else body.model_dump(exclude_none=True)
+    job_id, created = create_job(
+        engine, sc.pk, trigger="api", params=params, stale_after_s=settings.lock_timeout_s
+    )
+    if created:
+        request.app.state.runner.submit(job_id)
+    return JobAccepted(job_id=job_id)
+
+
+@router.get(
+    "/{spacecraft_id}/calibration",
+    response_model=CalibrationDocument,
+    responses=_ERRORS,
+)
+def calibration_in_service(
+    spacecraft_id: str, engine: EngineDep, _who: Annotated[Principal, require_scope("read")]
+) -> Response:
+    """The calibration in service (CONTRACT section 4); 404 before the first."""
+    with read_tx(engine) as conn:
+        sc = get_spacecraft(conn, spacecraft_id)
+        doc = conn.execute(
+            sa.select(Calibration.document).where(
+                Calibration.spacecraft_pk == sc.pk, Calibration.status == "in_service"
+            )
+        ).scalar_one_or_none()
+    if doc is None:
+        raise HTTPException(
+            status_code=404, detail=f"spacecraft {spacecraft_id!r} has no calibration in service"
+        )
+    return Response(content=orjson.dumps(doc), media_type="application/json")
+
+
+@router.get("/{spacecraft_id}/calibrations", responses=_ERRORS)
+def calibration_versions(
+    spacecraft_id: str, engine: EngineDep, _who: Annotated[Principal, require_scope("read")]
+) -> list[CalibrationVersionPublic]:
+    """Every version, newest first, with status (in_service | rejected | superseded) and reason."""
+    with read_tx(engine) as conn:
+        sc = get_spacecraft(conn, spacecraft_id)
+        rows = conn.execute(
+            sa.select(Calibration)
+            .where(Calibration.spacecraft_pk == sc.pk)
+            .order_by(Calibration.version.desc())
+        ).all()
+    return [
+        CalibrationVersionPublic(
+            version=c.version,
+            status=c.status,  # type: ignore[arg-type]
+            reason=c.reason,
+            created_at=iso(c.created_at),
+            holdout_rms_nt=c.holdout_rms_nt,
+            job_id=c.job_id,
+            provenance=c.provenance,
+            document=c.document,
+        )
+        for c in rows
+    ]
+
+
+def _recent_telemetry(engine: Any, spacecraft_id: str, window_s: float) -> tuple[Any, Any, Any]:
+    with read_tx(engine) as conn:
+        sc = get_spacecraft(conn, spacecraft_id)
+        latest = conn.execute(
+            sa.text("SELECT MAX(t_utc_us) FROM samples WHERE spacecraft_pk = :pk"), {"pk": sc.pk}
+        ).scalar_one_or_none()
+        if latest is None:
+            raise HTTPException(status_code=404, detail=f"spacecraft {spacecraft_id!r} has no data")
+        samples = read_samples(conn, sc.pk, start_utc_s=latest / 1e6 - window_s)
+        doc = conn.execute(
+            sa.select(Calibration.document).where(
+                Calibration.spacecraft_pk == sc.pk, Calibration.status == "in_service"
+            )
+        ).scalar_one_or_none()
+    return sc, samples_to_telemetry(samples), doc
+
+
+@router.get("/{spacecraft_id}/residuals", responses=_ERRORS)
+def residuals(
+    spacecraft_id: str,
+    engine: EngineDep,
+    settings: SettingsDep,
+    _who: Annotated[Principal, require_scope("read")],
+    max_points: Annotated[int, Query(ge=10, le=20000)] = 1000,
+) -> dict[str, Any]:
+    """Residual |b_cal - b_ref| [nT] vs time of the calibration in service on the recent window."""
+    sc, tel, doc = _recent_telemetry(engine, spacecraft_id, settings.window_s)
+    if doc is None:
+        raise HTTPException(status_code=404, detail="no calibration in service")
+    n = tel.t_utc_s.shape[0]
+    idx = np.unique(np.linspace(0, n - 1, min(n, max_points)).astype(int))
+    from service.jobs import _subset
+
+    part = _subset(tel, idx)  # type: ignore[arg-type]
+    try:
+        b_ref = science.reference_body_nt(
+            part,
+            orbit=science.load_orbit(sc.tle, sc.omm),
+            attitude_frame=sc.attitude_frame,
+            field=str(doc.get("reference_field", settings.reference_field)),
+        )
+    except ValueError as exc:
+        raise HTTPException(status_code=422, detail=str(exc)) from None
+    res = science.apply_linear(doc, part.b_raw_nt) - b_ref
+    return {
+        "spacecraft": sc.id,
+        "version": doc.get("version"),
+        "t_utc_s": part.t_utc_s.tolist(),
+        "residual_nt": np.linalg.norm(res, axis=1).tolist(),
+        "rms_nt": float(np.sqrt(np.mean(res**2))),
+    }
+
+
+_diagnosis_lock = threading.Lock()
+
+
+@router.get("/{spacecraft_id}/diagnosis", responses={**_ERRORS, 501: {"model": ErrorPublic}})
+async def diagnosis(
+    spacecraft_id: str,
+    request: Request,
+    engine: EngineDep,
+    settings: SettingsDep,
+    _who: Annotated[Principal, require_scope("read")],
+) -> dict[str, Any]:
+    """A diagnosis report (CONTRACT section 5) on the stored telemetry's recent window."""
+
+    def work() -> dict[str, Any]:
+        sc, tel, _doc = _recent_telemetry(engine, spacecraft_id, settings.window_s)
+        key = (sc.id, int(sc.sample_count))
+        cache: dict[Any, dict[str, Any]] = request.app.state.diagnosis_cache
+        with _diagnosis_lock:
+            if key in cache:
+                return cache[key]
+        try:
+            report = science.diagnose(
+                tel, orbit=science.load_orbit(sc.tle, sc.omm), attitude_frame=sc.attitude_frame
+            )
+        except ImportError:
+            raise HTTPException(
+                status_code=501, detail="this build has no orbitcal.diagnose"
+            ) from None
+        except ValueError as exc:
+            raise HTTPException(status_code=422, detail=str(exc)) from None
+        with _diagnosis_lock:
+            cache.clear()
+            cache[key] = report
+        return report
+
+    return await run_in_threadpool(work)

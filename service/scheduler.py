@@ -1,0 +1,110 @@
+"""The fleet scheduler (APScheduler 3, one per deployment): decides which spacecraft to retrain.
+
+Every ``scheduler_tick_s`` it creates a retraining job for each spacecraft whose cadence has elapsed
+since its last job and that has received at least ``min_new_samples`` since then (per-spacecraft
+overrides in ``spacecraft.schedule``), and re-submits jobs left queued (e.g. while the broker was
+down; running a job twice is harmless, :func:`service.jobs.run_retrain` is idempotent).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+
+import sqlalchemy as sa
+from apscheduler.schedulers.background import BackgroundScheduler
+from sqlalchemy.engine import Engine
+
+from service.jobs import JobRunner, create_job
+from service.settings import Settings
+from service.storage import Job, Spacecraft, read_tx
+
+__all__ = ["FleetScheduler", "due_spacecraft"]
+
+log = logging.getLogger("orbitcal.service.scheduler")
+
+
+def due_spacecraft(engine: Engine, settings: Settings, *, now: float) -> list[int]:
+    """Primary keys of spacecraft due for a scheduled retraining at ``now``."""
+    with read_tx(engine) as conn:
+        rows = conn.execute(
+            sa.select(
+                Spacecraft.pk,
+                Spacecraft.sample_count,
+                Spacecraft.samples_at_last_job,
+                Spacecraft.last_job_at,
+                Spacecraft.schedule,
+            )
+        ).all()
+    due = []
+    for pk, count, at_last, last_at, schedule in rows:
+        schedule = schedule or {}
+        cadence = float(schedule.get("cadence_s", settings.cadence_s))
+        min_new = int(schedule.get("min_new_samples", settings.min_new_samples))
+        if count - at_last < min_new:
+            continue
+        if last_at is not None and now - last_at < cadence:
+            continue
+        due.append(pk)
+    return due
+
+
+class FleetScheduler:
+    def __init__(self, engine: Engine, settings: Settings, runner: JobRunner) -> None:
+        self.engine = engine
+        self.settings = settings
+        self.runner = runner
+        self._scheduler = BackgroundScheduler(timezone="UTC")
+
+    def tick(self) -> list[str]:
+        """One scheduling pass; returns the ids of the jobs submitted."""
+        now = time.time()
+        submitted: list[str] = []
+        try:
+            for pk in due_spacecraft(self.engine, self.settings, now=now):
+                job_id, created = create_job(
+                    self.engine,
+                    pk,
+                    trigger="schedule",
+                    params={},
+                    stale_after_s=self.settings.lock_timeout_s,
+                )
+                if created:
+                    self.runner.submit(job_id)
+                    submitted.append(job_id)
+            with read_tx(self.engine) as conn:
+                stuck = (
+                    conn.execute(
+                        sa.select(Job.id).where(
+                            Job.status == "queued",
+                            Job.created_at < now - max(60.0, 6 * self.settings.scheduler_tick_s),
+                        )
+                    )
+                    .scalars()
+                    .all()
+                )
+            for job_id in stuck:
+                self.runner.submit(job_id)
+                submitted.append(job_id)
+        except sa.exc.SQLAlchemyError:
+            log.warning("scheduler tick skipped: database unavailable", exc_info=True)
+        except Exception:
+            log.exception("scheduler tick failed")
+        if submitted:
+            log.info("scheduled retraining", extra={"jobs": submitted})
+        return submitted
+
+    def start(self) -> None:
+        self._scheduler.add_job(
+            self.tick,
+            "interval",
+            seconds=self.settings.scheduler_tick_s,
+            id="orbitcal-fleet-tick",
+            max_instances=1,
+            coalesce=True,
+        )
+        self._scheduler.start()
+
+    def shutdown(self) -> None:
+        if self._scheduler.running:
+            self._scheduler.shutdown(wait=False)

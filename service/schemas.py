@@ -1,0 +1,188 @@
+"""Pydantic schemas of the HTTP API, per resource (``...In`` bodies, ``...Public`` answers)."""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from service.auth import SCOPE_RE
+
+__all__ = [
+    "ApiKeyCreated",
+    "ApiKeyIn",
+    "ApiKeyPublic",
+    "CalibrationDocument",
+    "CalibrationVersionPublic",
+    "ErrorItem",
+    "ErrorPublic",
+    "IngestResult",
+    "JobAccepted",
+    "JobPublic",
+    "OrbitIn",
+    "RetrainIn",
+    "RowRejection",
+    "ScheduleIn",
+    "SpacecraftIn",
+    "SpacecraftPublic",
+]
+
+SPACECRAFT_ID = r"^[A-Za-z0-9_.\-]{1,64}$"
+
+
+class ErrorItem(BaseModel):
+    field: str | None = None
+    row: int | None = None
+    reason: str
+
+
+class ErrorPublic(BaseModel):
+    detail: str
+    errors: list[ErrorItem] = []
+
+
+class ScheduleIn(BaseModel):
+    """Per-spacecraft overrides of the retraining schedule."""
+
+    model_config = ConfigDict(extra="forbid")
+    cadence_s: float | None = Field(
+        default=None, gt=0, description="retrain at most this often [s]"
+    )
+    min_new_samples: int | None = Field(default=None, ge=0)
+    window_s: float | None = Field(default=None, gt=0, description="sliding window [s]")
+
+
+class _OrbitFields(BaseModel):
+    tle: str | None = Field(
+        default=None, max_length=1000, description="two-line element set (optional name line first)"
+    )
+    omm: dict[str, Any] | None = Field(default=None, description="CCSDS OMM as a JSON object")
+
+    @model_validator(mode="after")
+    def _one_orbit(self) -> _OrbitFields:
+        if self.tle is not None and self.omm is not None:
+            raise ValueError("give either tle or omm, not both")
+        return self
+
+
+class SpacecraftIn(_OrbitFields):
+    model_config = ConfigDict(extra="forbid")
+    id: str = Field(pattern=SPACECRAFT_ID, description="spacecraft identifier")
+    attitude_frame: Literal["GCRS", "ITRS"] = "GCRS"
+    schedule: ScheduleIn | None = None
+
+
+class OrbitIn(_OrbitFields):
+    model_config = ConfigDict(extra="forbid")
+
+    @model_validator(mode="after")
+    def _needs_one(self) -> OrbitIn:
+        if self.tle is None and self.omm is None:
+            raise ValueError("give tle or omm")
+        return self
+
+
+class SpacecraftPublic(BaseModel):
+    id: str
+    attitude_frame: str
+    orbit: Literal["tle", "omm"] | None
+    tle: str | None
+    schedule: dict[str, Any] | None
+    created_at: str
+    samples: int
+    calibration_version: int | None = None
+    holdout_rms_nt: float | None = None
+
+
+class RowRejection(BaseModel):
+    row: int = Field(description="0-based data row (packet number for CCSDS)")
+    reason: str
+
+
+class IngestResult(BaseModel):
+    accepted: int
+    duplicates: int
+    rejected: list[RowRejection]
+
+
+class RetrainIn(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    method: str | None = Field(default=None, max_length=64)
+    window_s: float | None = Field(default=None, gt=0)
+    seed: int | None = Field(default=None, ge=0, lt=2**63)
+
+
+class JobAccepted(BaseModel):
+    job_id: str
+
+
+class JobPublic(BaseModel):
+    id: str
+    job_id: str
+    spacecraft: str
+    kind: str
+    trigger: str
+    status: Literal["queued", "running", "succeeded", "failed"]
+    error: str | None
+    params: dict[str, Any]
+    result: dict[str, Any] | None
+    created_at: str
+    started_at: str | None
+    finished_at: str | None
+
+
+class CalibrationDocument(BaseModel):
+    """CONTRACT section 4 (extra keys allowed)."""
+
+    model_config = ConfigDict(extra="allow")
+    spacecraft: str
+    version: int
+    method: str
+    created_at: str
+    reference_field: str
+    data: dict[str, Any]
+    metrics: dict[str, Any]
+    linear: dict[str, Any]
+    model: dict[str, Any]
+
+
+class CalibrationVersionPublic(BaseModel):
+    version: int
+    status: Literal["in_service", "rejected", "superseded"]
+    reason: str | None
+    created_at: str
+    holdout_rms_nt: float | None
+    job_id: str | None
+    provenance: dict[str, Any]
+    document: dict[str, Any]
+
+
+class ApiKeyIn(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    name: str = Field(min_length=1, max_length=128)
+    scopes: list[str] = Field(min_length=1, max_length=64)
+
+    @field_validator("scopes")
+    @classmethod
+    def _valid_scopes(cls, scopes: list[str]) -> list[str]:
+        for s in scopes:
+            if not SCOPE_RE.match(s):
+                raise ValueError(
+                    f"scope {s!r} is not admin, ingest:<spacecraft|*> or read:<spacecraft|*>"
+                )
+        return scopes
+
+
+class ApiKeyCreated(BaseModel):
+    key: str = Field(description="shown once; only its sha256 is stored")
+    prefix: str
+    name: str
+    scopes: list[str]
+
+
+class ApiKeyPublic(BaseModel):
+    prefix: str
+    name: str
+    scopes: list[str]
+    created_at: str
+    revoked: bool

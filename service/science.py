@@ -1,0 +1,96 @@
+"""The service's seams into the library: each function here is one call into ``orbitcal``.
+
+Everything scientific (orbits, reference field, calibration, diagnosis) happens in the library; the
+service only moves data between the database and these calls.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from orbitcal.telemetry import Telemetry
+
+__all__ = [
+    "apply_linear",
+    "diagnose",
+    "fit_calibration",
+    "load_orbit",
+    "reference_body_nt",
+]
+
+
+def load_orbit(tle: str | None, omm: dict[str, Any] | None) -> Any:
+    """An ``orbitcal.orbit.Orbit`` from a TLE text or an OMM dict (raises ``ValueError``)."""
+    if tle is None and omm is None:
+        return None
+    from orbitcal.orbit import Orbit
+
+    if tle is not None:
+        return Orbit.from_tle(tle)
+    return Orbit.from_omm(omm)
+
+
+def reference_body_nt(
+    telemetry: Telemetry, *, orbit: Any, attitude_frame: str, field: str
+) -> np.ndarray:
+    """Reference field at each sample in the body frame, ``(N, 3)`` [nT]."""
+    from orbitcal.truth import truth_body_nt
+
+    r_itrs_km = telemetry.r_itrs_km
+    if r_itrs_km is None:
+        if orbit is None:
+            raise ValueError("no position: the telemetry has no r_x,r_y,r_z and no TLE/OMM is set")
+        r_itrs_km = orbit.propagate(telemetry.t_utc_s).r_itrs_km
+    if telemetry.q_wxyz is None:
+        raise ValueError("vector calibration needs the attitude columns q_w,q_x,q_y,q_z")
+    return np.asarray(
+        truth_body_nt(
+            telemetry.t_utc_s,
+            r_itrs_km,
+            telemetry.q_wxyz,
+            attitude_frame=attitude_frame,
+            field=field,
+        )
+    )
+
+
+def fit_calibration(
+    telemetry: Telemetry,
+    *,
+    orbit: Any,
+    method: str,
+    field: str,
+    attitude_frame: str,
+    holdout_fraction: float,
+    rng: np.random.Generator,
+) -> dict[str, Any]:
+    """Fit a calibration on ``telemetry``; return its section-4 document."""
+    from orbitcal.pipeline import calibrate_telemetry
+
+    _calibration, document = calibrate_telemetry(
+        telemetry,
+        orbit=orbit,
+        method=method,
+        field=field,
+        attitude_frame=attitude_frame,
+        holdout_fraction=holdout_fraction,
+        rng=rng,
+    )
+    return dict(document)
+
+
+def apply_linear(document: dict[str, Any], b_raw_nt: np.ndarray) -> np.ndarray:
+    """``b_cal = M @ (b_raw - o)`` with the document's ``linear`` part, ``(N, 3)`` [nT]."""
+    M = np.asarray(document["linear"]["M"], dtype=np.float64)
+    o = np.asarray(document["linear"]["o"], dtype=np.float64)
+    return (np.asarray(b_raw_nt) - o) @ M.T
+
+
+def diagnose(telemetry: Telemetry, *, orbit: Any, attitude_frame: str) -> dict[str, Any]:
+    """The section-5 diagnosis report on ``telemetry``."""
+    from orbitcal.diagnose import diagnose as run
+
+    report = run(telemetry, orbit=orbit, attitude_frame=attitude_frame)
+    return dict(report)
