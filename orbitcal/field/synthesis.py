@@ -46,7 +46,8 @@ CHUNK_SIZE = 2048
 _POLE_EPS_RAD = 1e-9
 
 FloatArray = NDArray[np.float64]
-#: Per-chunk coefficient provider: (start, stop) sample indices -> (stop - start, K) degree blocks.
+#: Per-chunk coefficient provider: (start, stop) sample indices -> (K, stop - start) degree blocks
+#: (transposed: orders along axis 0, points along axis 1).
 CoeffProvider = Callable[[int, int], FloatArray]
 
 
@@ -121,7 +122,6 @@ def _recursion_constants(
         den = np.sqrt(n * n - m * m)
         a_list.append((2 * n - 1) / den)
         b = np.sqrt(np.clip((n - 1) ** 2 - m * m, 0.0, None)) / den
-        a_list[-1] = a_list[-1]
         b_list.append(b)
         d_list.append(1.0 if n == 1 else float(np.sqrt((2 * n - 1) / (2 * n))))
         m_list.append(np.arange(n + 1, dtype=np.float64))
@@ -244,8 +244,8 @@ def synth_internal_nec_nt(
     ----------
     coeffs : ndarray, shape (K,) or (N, K), or callable
         Gauss coefficients in degree blocks (:func:`to_degree_blocks`) [nT]: one set for all
-        points, one row per point, or ``provider(start, stop) -> (stop - start, K)`` called once
-        per chunk (so per-sample coefficients never exist for all N at once).
+        points, one row per point, or ``provider(start, stop) -> (K, stop - start)`` (note the
+        transpose) called once per chunk, so per-sample coefficients never exist for all N at once.
     radius_km : ndarray, shape (N,)
         Geocentric radius [km].
     colat_deg : ndarray, shape (N,)
