@@ -161,7 +161,7 @@ def create_app(
     async def _http_error(_request: Request, exc: HTTPException) -> JSONResponse:
         field = (exc.headers or {}).get("X-Error-Field")
         errors = [{"field": field, "reason": exc.detail}] if field else []
-        return _error(exc.status_code, str(exc.detail), errors, exc.headers)
+        return _error(exc.status_code, str(exc.detail), errors, dict(exc.headers or {}))
 
     @app.exception_handler(RequestValidationError)
     async def _validation_error(_request: Request, exc: RequestValidationError) -> JSONResponse:

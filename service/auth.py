@@ -36,7 +36,7 @@ KEY_PREFIX = "ock_"
 
 @dataclass(frozen=True)
 class Principal:
-    """Who is calling: the key's name and scopes (``anonymous`` with every scope when auth is off)."""
+    """Who is calling: the key's name and scopes (all of them when auth is off)."""
 
     name: str
     scopes: frozenset[str]

@@ -16,7 +16,7 @@ from orbitcal.telemetry import RowError, Telemetry, TelemetryError, from_frame, 
 __all__ = [
     "CCSDS_MEDIA_TYPE",
     "MEDIA_TYPES",
-    "BodyTooLarge",
+    "BodyTooLargeError",
     "ParsedUpload",
     "decompress",
     "parse_body",
@@ -36,7 +36,7 @@ MEDIA_TYPES: dict[str, str] = {
 }
 
 
-class BodyTooLarge(ValueError):
+class BodyTooLargeError(ValueError):
     """The (decompressed) body exceeds the configured limit."""
 
 
@@ -60,7 +60,7 @@ def decompress(body: bytes, encoding: str, *, limit: int) -> bytes:
     except zlib.error as exc:
         raise ValueError(f"body is not valid {encoding}: {exc}") from None
     if len(out) > limit or d.unconsumed_tail:
-        raise BodyTooLarge(f"decompressed body exceeds {limit} bytes")
+        raise BodyTooLargeError(f"decompressed body exceeds {limit} bytes")
     return out
 
 

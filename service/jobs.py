@@ -170,7 +170,7 @@ def _retrain(
 ) -> dict[str, Any]:
     params = dict(job.params)
     schedule = dict(sc.schedule or {})
-    window_s = float(params.get("window_s", schedule.get("window_s", settings.window_s)))
+    window_s = float(params.get("window_s") or schedule.get("window_s") or settings.window_s)
     method = str(params.get("method", settings.method))
     field = str(params.get("field", settings.reference_field))
     holdout_fraction = float(params.get("holdout_fraction", settings.holdout_fraction))
@@ -221,13 +221,14 @@ def _retrain(
     span = utc_s_to_iso([float(holdout.t_utc_s[0]), float(holdout.t_utc_s[-1])])
     if champion_rms is None:
         promote, reason = True, "first calibration of this spacecraft"
-    elif challenger_rms < champion_rms * (1.0 - settings.promote_margin):
+    elif champion is not None and challenger_rms < champion_rms * (1.0 - settings.promote_margin):
         promote = True
         reason = (
             f"held-out RMS {challenger_rms:.3f} nT beats version {champion.version}'s "
             f"{champion_rms:.3f} nT on {span[0]}..{span[1]}"
         )
     else:
+        assert champion is not None
         promote = False
         reason = (
             f"held-out RMS {challenger_rms:.3f} nT does not beat version {champion.version}'s "

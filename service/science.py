@@ -36,24 +36,12 @@ def reference_body_nt(
     telemetry: Telemetry, *, orbit: Any, attitude_frame: str, field: str
 ) -> np.ndarray:
     """Reference field at each sample in the body frame, ``(N, 3)`` [nT]."""
-    from orbitcal.truth import truth_body_nt
+    from orbitcal.truth import truth_for_telemetry
 
-    r_itrs_km = telemetry.r_itrs_km
-    if r_itrs_km is None:
-        if orbit is None:
-            raise ValueError("no position: the telemetry has no r_x,r_y,r_z and no TLE/OMM is set")
-        r_itrs_km = orbit.propagate(telemetry.t_utc_s).r_itrs_km
-    if telemetry.q_wxyz is None:
+    truth = truth_for_telemetry(telemetry, orbit=orbit, attitude_frame=attitude_frame, field=field)
+    if truth.b_body_nt is None:
         raise ValueError("vector calibration needs the attitude columns q_w,q_x,q_y,q_z")
-    return np.asarray(
-        truth_body_nt(
-            telemetry.t_utc_s,
-            r_itrs_km,
-            telemetry.q_wxyz,
-            attitude_frame=attitude_frame,
-            field=field,
-        )
-    )
+    return np.asarray(truth.b_body_nt)
 
 
 def fit_calibration(
@@ -90,7 +78,7 @@ def apply_linear(document: dict[str, Any], b_raw_nt: np.ndarray) -> np.ndarray:
 
 def diagnose(telemetry: Telemetry, *, orbit: Any, attitude_frame: str) -> dict[str, Any]:
     """The section-5 diagnosis report on ``telemetry``."""
-    from orbitcal.diagnose import diagnose as run
+    from orbitcal.diagnose import diagnose as run  # type: ignore[attr-defined]
 
     report = run(telemetry, orbit=orbit, attitude_frame=attitude_frame)
     return dict(report)

@@ -48,7 +48,7 @@ class Settings(BaseSettings):
     #: A retraining lock older than this is considered abandoned (crashed worker) [s].
     lock_timeout_s: float = 1800.0
 
-    #: "inline": jobs run in a thread pool inside the API; "celery": jobs are sent to Celery workers.
+    #: "inline": jobs run in a thread pool inside the API; "celery": jobs go to Celery workers.
     job_backend: Literal["inline", "celery"] = "inline"
     #: Whether this process runs the scheduler (exactly one per deployment).
     scheduler: bool = True

@@ -1,11 +1,11 @@
 """Storage: SQLAlchemy 2 tables, engine factory, migrations and the bulk operations of the service.
 
-The same code runs on SQLite (WAL, the embedded default) and PostgreSQL. Samples are keyed by
-``(spacecraft_pk, t_utc_us)``: the primary key is at once the idempotency constraint (a second sample
-at the same time for the same spacecraft changes nothing and is counted as a duplicate) and the index
-behind per-spacecraft time-range reads (a clustered ``WITHOUT ROWID`` b-tree on SQLite, a b-tree
-primary-key index on PostgreSQL). Time is stored as integer microseconds of UTC (Unix convention,
-leap seconds not counted) so that equality is exact.
+The same code runs on SQLite (WAL, the embedded default) and PostgreSQL. Samples are keyed
+by ``(spacecraft_pk, t_utc_us)``: the primary key is at once the idempotency constraint (a second
+sample at the same time for the same spacecraft changes nothing and is counted as a duplicate) and
+the index behind per-spacecraft time-range reads (a clustered ``WITHOUT ROWID`` b-tree on
+SQLite, a b-tree primary-key index on PostgreSQL). Time is stored as integer microseconds of
+UTC (Unix convention, leap seconds not counted) so that equality is exact.
 """
 
 from __future__ import annotations

@@ -1,6 +1,7 @@
 """Alembic environment: runs on the connection handed over by ``service.storage.upgrade``.
 
-From the command line: ``alembic -c service/alembic.ini -x url=sqlite:///orbitcal.sqlite upgrade head``.
+From the command line:
+``alembic -c service/alembic.ini -x url=sqlite:///orbitcal.sqlite upgrade head``.
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ from service.deps import EngineDep, SettingsDep, get_spacecraft
 from service.ingest import (
     CCSDS_MEDIA_TYPE,
     MEDIA_TYPES,
-    BodyTooLarge,
+    BodyTooLargeError,
     decompress,
     parse_body,
     telemetry_to_rows,
@@ -102,7 +102,7 @@ async def ingest_telemetry(
             raw = decompress(
                 body, request.headers.get("content-encoding", ""), limit=settings.max_body_bytes
             )
-        except BodyTooLarge as exc:
+        except BodyTooLargeError as exc:
             raise HTTPException(status_code=413, detail=str(exc)) from None
         except ValueError as exc:
             raise HTTPException(status_code=400, detail=str(exc)) from None

@@ -15,6 +15,20 @@ down_revision = None
 branch_labels = None
 depends_on = None
 
+_OPTIONAL = (
+    "q_w",
+    "q_x",
+    "q_y",
+    "q_z",
+    "r_x",
+    "r_y",
+    "r_z",
+    "temperature",
+    "mtq_x",
+    "mtq_y",
+    "mtq_z",
+)
+
 
 def upgrade() -> None:
     op.create_table(
@@ -40,22 +54,7 @@ def upgrade() -> None:
         ),
         sa.Column("t_utc_us", sa.BigInteger, primary_key=True),
         *[sa.Column(c, sa.Float, nullable=False) for c in ("b_x", "b_y", "b_z")],
-        *[
-            sa.Column(c, sa.Float, nullable=True)
-            for c in (
-                "q_w",
-                "q_x",
-                "q_y",
-                "q_z",
-                "r_x",
-                "r_y",
-                "r_z",
-                "temperature",
-                "mtq_x",
-                "mtq_y",
-                "mtq_z",
-            )
-        ],  # fmt: skip
+        *[sa.Column(c, sa.Float, nullable=True) for c in _OPTIONAL],
         sa.Column("hk", sa.Text, nullable=True),
         sqlite_with_rowid=False,
     )
