@@ -1,0 +1,194 @@
+"""Magnetometer calibrators behind one interface, and a registry by method name.
+
+| method | kind | source |
+|---|---|---|
+| ``linear`` | 12-parameter vector least squares (closed form) | Wang et al. 2020 eq. 1 |
+| ``linear-hk`` | the same plus housekeeping regressors | – |
+| ``lmbp`` | the paper's 3-H-3 BP network trained by LM, raw inputs | Wang et al. 2020 |
+| ``lmbp-hk`` | on-orbit network: housekeeping inputs and a linear path | this project |
+| ``twostep`` | attitude-free scalar calibration | Alonso & Shuster 2002 |
+| ``flann`` | attitude-free, upper-triangular ``C`` + bias | Wu & Huang (seed 001) |
+| ``online`` | one-sample ellipsoid estimator, ``η → chol → G, X_0`` | Chen (seed 002) |
+
+Vector methods need the reference field in the body frame (attitude); scalar methods need only its
+magnitude.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import torch
+
+from orbitcal.calibrate.base import AffineCalibration, Calibration, FitData
+from orbitcal.calibrate.errors import (
+    CalibrationError,
+    DocumentError,
+    MissingAttitudeError,
+    PoorCoverageError,
+    TooFewSamplesError,
+    UnknownMethodError,
+)
+from orbitcal.calibrate.linear import fit_linear
+from orbitcal.calibrate.lm import LMOptions
+from orbitcal.calibrate.lmbp import LMBPCalibration, fit_lmbp
+from orbitcal.calibrate.online import fit_online
+from orbitcal.calibrate.scalar import fit_flann, fit_twostep
+
+__all__ = [
+    "DEFAULT_METHOD",
+    "METHODS",
+    "AffineCalibration",
+    "Calibration",
+    "CalibrationError",
+    "DocumentError",
+    "FitData",
+    "LMBPCalibration",
+    "MethodSpec",
+    "MissingAttitudeError",
+    "PoorCoverageError",
+    "TooFewSamplesError",
+    "UnknownMethodError",
+    "calibration_class",
+    "fit_method",
+]
+
+ProgressCallback = Callable[[int, float], None]
+
+
+@dataclass(frozen=True)
+class MethodSpec:
+    """A registered calibrator: how to fit it and which class loads its documents."""
+
+    name: str
+    cls: type[Calibration]
+    vector: bool
+    description: str
+    fit: Callable[..., Calibration]
+
+
+def _fit_lmbp(use_hk: bool) -> Callable[..., Calibration]:
+    def fit(
+        data: FitData,
+        *,
+        generator: torch.Generator,
+        callback: ProgressCallback | None = None,
+        warm_start: Calibration | None = None,
+        n_hidden: int = 3,
+        restarts: int | None = None,
+        max_epochs: int = 200,
+    ) -> Calibration:
+        return fit_lmbp(
+            data,
+            n_hidden=n_hidden,
+            use_hk=use_hk,
+            restarts=restarts if restarts is not None else (1 if use_hk else 3),
+            generator=generator,
+            options=LMOptions(max_epochs=max_epochs),
+            warm_start=warm_start if isinstance(warm_start, LMBPCalibration) else None,
+            callback=callback,
+        )
+
+    return fit
+
+
+def _simple(fn: Callable[[FitData], Calibration]) -> Callable[..., Calibration]:
+    def fit(data: FitData, **_: Any) -> Calibration:
+        return fn(data)
+
+    return fit
+
+
+METHODS: dict[str, MethodSpec] = {
+    spec.name: spec
+    for spec in (
+        MethodSpec(
+            "linear",
+            AffineCalibration,
+            True,
+            "12-parameter vector least squares",
+            _simple(fit_linear),
+        ),
+        MethodSpec(
+            "linear-hk",
+            AffineCalibration,
+            True,
+            "12-parameter vector least squares + housekeeping regressors",
+            _simple(lambda d: fit_linear(d, use_hk=True)),
+        ),
+        MethodSpec(
+            "lmbp",
+            LMBPCalibration,
+            True,
+            "Wang et al. 2020: 3-H-3 BP network trained by Levenberg-Marquardt",
+            _fit_lmbp(False),
+        ),
+        MethodSpec(
+            "lmbp-hk",
+            LMBPCalibration,
+            True,
+            "LM-BP network with housekeeping inputs and a linear path",
+            _fit_lmbp(True),
+        ),
+        MethodSpec(
+            "twostep",
+            AffineCalibration,
+            False,
+            "TWOSTEP attitude-free scalar calibration (Alonso & Shuster 2002)",
+            _simple(fit_twostep),
+        ),
+        MethodSpec(
+            "flann",
+            AffineCalibration,
+            False,
+            "FLANN scalar calibration, upper-triangular C + bias (Wu & Huang)",
+            _simple(fit_flann),
+        ),
+        MethodSpec(
+            "online",
+            AffineCalibration,
+            False,
+            "one-sample ellipsoid estimator (Chen, patent)",
+            _simple(fit_online),
+        ),
+    )
+}
+
+DEFAULT_METHOD = "lmbp-hk"
+
+
+def _spec(name: str) -> MethodSpec:
+    try:
+        return METHODS[name]
+    except KeyError:
+        raise UnknownMethodError(name, sorted(METHODS)) from None
+
+
+def calibration_class(name: str) -> type[Calibration]:
+    """The class that loads documents of method ``name``."""
+    try:
+        return _spec(name).cls
+    except UnknownMethodError as exc:
+        raise DocumentError(str(exc)) from None
+
+
+def fit_method(
+    name: str,
+    data: FitData,
+    *,
+    generator: torch.Generator,
+    callback: ProgressCallback | None = None,
+    **options: Any,
+) -> Calibration:
+    """Fit calibrator ``name`` on ``data``.
+
+    Raises
+    ------
+    UnknownMethodError, MissingAttitudeError, TooFewSamplesError, PoorCoverageError
+    """
+    spec = _spec(name)
+    if spec.vector and data.b_ref_body_nt is None:
+        raise MissingAttitudeError(name)
+    return spec.fit(data, generator=generator, callback=callback, **options)

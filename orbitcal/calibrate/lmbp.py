@@ -1,0 +1,492 @@
+"""The Levenberg–Marquardt-trained BP network calibrator (Wang et al. 2020), on-orbit variant.
+
+Network (Wang et al. 2020, section 2: one hidden layer, 3-H-3):
+
+    u = scale_in([b_raw, x_hk])                       inputs mapped to [-1, 1] (min-max)
+    y = W2 · φ(W1 u + b1) + b2 (+ L u)                φ = tanh or logistic sigmoid
+    b_cal = unscale_out(y)                            outputs mapped back from [-1, 1]
+
+``"lmbp"`` is the paper's network: raw magnetometer inputs only, no linear path, random
+(Nguyen–Widrow-style) initialisation. ``"lmbp-hk"`` is the on-orbit variant: housekeeping inputs
+(temperature, magnetorquer dipoles, any ``hk_*``) and a linear path ``L u`` beside the hidden layer,
+initialised from the linear least-squares solution, so an affine sensor model is exact from the
+first epoch and the hidden layer learns only what is left (NOTES: restarts and a linear-path
+initialisation matter more than speed at H ≥ 6).
+
+Training is :func:`orbitcal.calibrate.lm.levenberg_marquardt` (Wang et al. 2020, eq. 14) with the
+analytic Jacobian below, on the residual ``y − scale_out(b_ref)`` in scaled units (so the reported
+MSE is the paper's/MATLAB's normalised MSE).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+import torch
+from numpy.typing import NDArray
+
+from orbitcal.calibrate.base import Calibration, FitData, best_linear_approximation
+from orbitcal.calibrate.errors import DocumentError, MissingAttitudeError, TooFewSamplesError
+from orbitcal.calibrate.lm import LMOptions, LMResult, levenberg_marquardt
+
+__all__ = [
+    "Activation",
+    "BPNetwork",
+    "LMBPCalibration",
+    "MinMaxScaler",
+    "NetworkProblem",
+    "fit_lmbp",
+]
+
+FloatArray = NDArray[np.float64]
+Activation = Literal["tanh", "sigmoid"]
+
+
+@dataclass(frozen=True)
+class MinMaxScaler:
+    """Maps each column linearly from ``[lo, hi]`` to ``[-1, 1]`` (MATLAB ``mapminmax``).
+
+    Constant columns (``hi == lo``) map to 0.
+    """
+
+    lo: tuple[float, ...]
+    hi: tuple[float, ...]
+
+    @classmethod
+    def fit(cls, x: FloatArray) -> MinMaxScaler:
+        x = np.asarray(x, dtype=np.float64)
+        return cls(tuple(float(v) for v in x.min(axis=0)), tuple(float(v) for v in x.max(axis=0)))
+
+    def _gain(self) -> tuple[FloatArray, FloatArray]:
+        lo = np.asarray(self.lo)
+        span = np.asarray(self.hi) - lo
+        gain = np.where(span > 0, 2.0 / np.where(span > 0, span, 1.0), 0.0)
+        return lo, gain
+
+    def forward(self, x: FloatArray) -> FloatArray:
+        lo, gain = self._gain()
+        out: FloatArray = (np.asarray(x, dtype=np.float64) - lo) * gain - np.where(
+            gain > 0, 1.0, 0.0
+        )
+        return out
+
+    def inverse(self, y: FloatArray) -> FloatArray:
+        lo, gain = self._gain()
+        safe = np.where(gain > 0, gain, 1.0)
+        out: FloatArray = np.where(gain > 0, (np.asarray(y) + 1.0) / safe + lo, lo)
+        return out
+
+    def to_json(self) -> dict[str, list[float]]:
+        return {"min": list(self.lo), "max": list(self.hi)}
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> MinMaxScaler:
+        return cls(tuple(float(v) for v in d["min"]), tuple(float(v) for v in d["max"]))
+
+
+@dataclass(frozen=True)
+class BPNetwork:
+    """Shape of a one-hidden-layer network; parameters live in a flat float64 vector.
+
+    Layout of the flat vector: ``W1 (H, n_in)``, ``b1 (H)``, ``W2 (3, H)``, ``b2 (3)`` and, with a
+    linear path, ``L (3, n_in)``; all row-major.
+    """
+
+    n_in: int
+    n_hidden: int
+    activation: Activation = "tanh"
+    linear_path: bool = False
+    n_out: int = 3
+
+    @property
+    def n_params(self) -> int:
+        h, i, o = self.n_hidden, self.n_in, self.n_out
+        return h * i + h + o * h + o + (o * i if self.linear_path else 0)
+
+    def unpack(self, w: torch.Tensor) -> dict[str, torch.Tensor]:
+        h, i, o = self.n_hidden, self.n_in, self.n_out
+        k = 0
+        out: dict[str, torch.Tensor] = {}
+        for name, shape in (("W1", (h, i)), ("b1", (h,)), ("W2", (o, h)), ("b2", (o,))):
+            size = math.prod(shape)
+            out[name] = w[k : k + size].reshape(shape)
+            k += size
+        if self.linear_path:
+            out["L"] = w[k : k + o * i].reshape(o, i)
+        return out
+
+    def pack(self, parts: dict[str, torch.Tensor]) -> torch.Tensor:
+        names = ["W1", "b1", "W2", "b2"] + (["L"] if self.linear_path else [])
+        return torch.cat([parts[n].reshape(-1).to(torch.float64) for n in names])
+
+    def _phi(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        if self.activation == "tanh":
+            h = torch.tanh(z)
+            return h, 1.0 - h * h
+        h = torch.sigmoid(z)
+        return h, h * (1.0 - h)
+
+    def forward(self, w: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
+        """Scaled outputs ``(N, 3)`` for scaled inputs ``u (N, n_in)``."""
+        p = self.unpack(w)
+        h, _ = self._phi(u @ p["W1"].T + p["b1"])
+        y = h @ p["W2"].T + p["b2"]
+        if self.linear_path:
+            y = y + u @ p["L"].T
+        return y
+
+    def forward_and_jacobian(
+        self, w: torch.Tensor, u: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Outputs ``(N, 3)`` and the analytic Jacobian ``(N·3, n_params)`` (row = sample·3 + k)."""
+        p = self.unpack(w)
+        N = u.shape[0]
+        H, Ni, No = self.n_hidden, self.n_in, self.n_out
+        h, dh = self._phi(u @ p["W1"].T + p["b1"])
+        y = h @ p["W2"].T + p["b2"]
+        if self.linear_path:
+            y = y + u @ p["L"].T
+        G = p["W2"].unsqueeze(0) * dh.unsqueeze(1)  # (N, No, H): ∂y_k/∂z_j
+        blocks = [
+            (G.unsqueeze(3) * u.view(N, 1, 1, Ni)).reshape(N, No, H * Ni),  # W1
+            G,  # b1
+            _block_diag_rows(h, No),  # W2
+            torch.eye(No, dtype=u.dtype).expand(N, No, No),  # b2
+        ]
+        if self.linear_path:
+            blocks.append(_block_diag_rows(u, No))
+        J = torch.cat(blocks, dim=2).reshape(N * No, self.n_params)
+        return y, J
+
+    def init_params(
+        self,
+        generator: torch.Generator,
+        *,
+        linear_init: tuple[torch.Tensor, torch.Tensor] | None = None,
+    ) -> torch.Tensor:
+        """Nguyen–Widrow-style random start; with ``linear_init=(L, b2)`` the linear path starts at
+        the least-squares solution and the output weights near zero."""
+        H, Ni, No = self.n_hidden, self.n_in, self.n_out
+        beta = 0.7 * H ** (1.0 / max(Ni, 1))
+        W1 = torch.rand(H, Ni, generator=generator, dtype=torch.float64) * 2 - 1
+        W1 = beta * W1 / W1.norm(dim=1, keepdim=True).clamp_min(1e-12)
+        b1 = beta * (torch.rand(H, generator=generator, dtype=torch.float64) * 2 - 1)
+        W2 = torch.rand(No, H, generator=generator, dtype=torch.float64) * 2 - 1
+        b2 = torch.zeros(No, dtype=torch.float64)
+        parts = {"W1": W1, "b1": b1, "W2": W2, "b2": b2}
+        if self.linear_path:
+            if linear_init is None:
+                parts["L"] = torch.zeros(No, Ni, dtype=torch.float64)
+            else:
+                parts["L"], parts["b2"] = linear_init
+                parts["W2"] = 1e-3 * W2
+        return self.pack(parts)
+
+
+def _block_diag_rows(x: torch.Tensor, n_out: int) -> torch.Tensor:
+    """``(N, n_out, n_out·d)`` with ``x`` (N, d) on the k-th block of row k (∂(Wx)_k/∂W)."""
+    N, d = x.shape
+    out = x.new_zeros(N, n_out, n_out * d)
+    for k in range(n_out):
+        out[:, k, k * d : (k + 1) * d] = x
+    return out
+
+
+class NetworkProblem:
+    """Least-squares problem ``r(w) = net(w, u) − t`` (scaled units) for the LM optimiser."""
+
+    def __init__(self, net: BPNetwork, u: torch.Tensor, t: torch.Tensor) -> None:
+        self.net = net
+        self.u = u
+        self.t = t
+
+    def residuals(self, params: torch.Tensor) -> torch.Tensor:
+        return (self.net.forward(params, self.u) - self.t).reshape(-1)
+
+    def residuals_and_jacobian(self, params: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        y, J = self.net.forward_and_jacobian(params, self.u)
+        return (y - self.t).reshape(-1), J
+
+    def normal_equations(
+        self, params: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``(r, JᵀJ, Jᵀr)`` of the analytic Jacobian, assembled from its block structure.
+
+        With ``ũ = [u, 1]`` and ``V_n = φ'(z_n) ⊗ ũ_n``, the rows of output ``k`` are
+        ``W2[k, j]·V_n`` on the hidden-layer weights ``(W1, b1)`` and ``Q_n = [h_n, 1, u_n]`` on
+        the output-``k`` weights ``(W2[k], b2[k], L[k])``. Hence ``JᵀJ`` needs only
+        ``VᵀV ⊙ (W2ᵀW2 ⊗ 1)``, ``VᵀQ`` and ``QᵀQ`` — never the dense Jacobian and its zero blocks.
+        """
+        net = self.net
+        p = net.unpack(params)
+        u = self.u
+        N = u.shape[0]
+        H, Ni, No = net.n_hidden, net.n_in, net.n_out
+        h, dh = net._phi(u @ p["W1"].T + p["b1"])
+        y = h @ p["W2"].T + p["b2"]
+        if net.linear_path:
+            y = y + u @ p["L"].T
+        r = y - self.t  # (N, No)
+        ones = torch.ones(N, 1, dtype=u.dtype)
+        ut = torch.cat([u, ones], dim=1)  # (N, Ni+1)
+        V = (dh.unsqueeze(2) * ut.unsqueeze(1)).reshape(N, H * (Ni + 1))
+        Q = torch.cat([h, ones, u], dim=1) if net.linear_path else torch.cat([h, ones], dim=1)
+        nq = Q.shape[1]
+        W2 = p["W2"]
+        vidx, ns = self._vidx()
+        rep = torch.repeat_interleave(torch.arange(H), Ni + 1)  # hidden unit of each V column
+        VtV = V.T @ V
+        shared = VtV * (W2.T @ W2)[rep][:, rep]
+        VtQ = V.T @ Q  # (H(Ni+1), nq)
+        QtQ = Q.T @ Q
+        e = r @ W2  # (N, H): Σ_k r_nk W2[k, j]
+        g_shared = ((dh * e).T @ ut).reshape(-1)  # (H(Ni+1),)
+        QtR = Q.T @ r  # (nq, No)
+        n_perm = ns + No * nq
+        JtJ = torch.empty(n_perm, n_perm, dtype=u.dtype)
+        Jtr = torch.empty(n_perm, dtype=u.dtype)
+        JtJ[:ns, :ns] = shared[vidx][:, vidx]
+        Jtr[:ns] = g_shared[vidx]
+        VtQ_s = VtQ[vidx]
+        w_rows = W2[:, rep[vidx]]  # (No, ns): W2[k, j(s)]
+        for k in range(No):
+            a = ns + k * nq
+            cross = VtQ_s * w_rows[k].unsqueeze(1)
+            JtJ[:ns, a : a + nq] = cross
+            JtJ[a : a + nq, :ns] = cross.T
+            for k2 in range(No):
+                b = ns + k2 * nq
+                JtJ[a : a + nq, b : b + nq] = QtQ if k2 == k else 0.0
+            Jtr[a : a + nq] = QtR[:, k]
+        perm = self._perm()
+        return r.reshape(-1), JtJ[perm][:, perm], Jtr[perm]
+
+    def _vidx(self) -> tuple[torch.Tensor, int]:
+        """Column of ``V`` for each shared parameter ``[W1 (j, i)…, b1 (j)…]``."""
+        H, Ni = self.net.n_hidden, self.net.n_in
+        idx = [j * (Ni + 1) + i for j in range(H) for i in range(Ni)]
+        idx += [j * (Ni + 1) + Ni for j in range(H)]
+        return torch.tensor(idx), H * Ni + H
+
+    def _perm(self) -> torch.Tensor:
+        """Index into the block order [shared, out_0, out_1, …] for each flat parameter."""
+        net = self.net
+        H, Ni, No = net.n_hidden, net.n_in, net.n_out
+        ns = H * Ni + H
+        nq = H + 1 + (Ni if net.linear_path else 0)
+        idx = list(range(ns))  # W1, b1 are first in both orders
+        idx += [ns + k * nq + j for k in range(No) for j in range(H)]  # W2[k, j]
+        idx += [ns + k * nq + H for k in range(No)]  # b2[k]
+        if net.linear_path:
+            idx += [ns + k * nq + H + 1 + i for k in range(No) for i in range(Ni)]  # L[k, i]
+        return torch.tensor(idx)
+
+
+class LMBPCalibration(Calibration):
+    """A trained network with its scalers; ``apply`` runs it in float64 (bit-for-bit after a
+    JSON round trip)."""
+
+    def __init__(
+        self,
+        method: str,
+        net: BPNetwork,
+        params: FloatArray,
+        in_scaler: MinMaxScaler,
+        out_scaler: MinMaxScaler,
+        *,
+        hk_names: list[str] | None = None,
+        linear_approx: tuple[FloatArray, FloatArray] | None = None,
+        training: dict[str, Any] | None = None,
+    ) -> None:
+        self.method = method
+        self.net = net
+        self.params = np.asarray(params, dtype=np.float64)
+        self.in_scaler = in_scaler
+        self.out_scaler = out_scaler
+        self.hk_names = list(hk_names or [])
+        self._linear = linear_approx
+        self.training = dict(training or {})
+
+    def _inputs(self, b_raw_nt: FloatArray, x_hk: FloatArray | None) -> FloatArray:
+        b = np.asarray(b_raw_nt, dtype=np.float64).reshape(-1, 3)
+        if self.hk_names:
+            if x_hk is None:
+                raise ValueError(f"{self.method} needs housekeeping columns {self.hk_names}")
+            x = np.asarray(x_hk, dtype=np.float64).reshape(b.shape[0], -1)
+            if x.shape[1] != len(self.hk_names):
+                raise ValueError(
+                    f"{self.method} needs housekeeping columns {self.hk_names}, "
+                    f"got {x.shape[1]} columns"
+                )
+            b = np.hstack([b, x])
+        return b
+
+    def apply(self, b_raw_nt: FloatArray, x_hk: FloatArray | None = None) -> FloatArray:
+        u = torch.from_numpy(self.in_scaler.forward(self._inputs(b_raw_nt, x_hk)))
+        with torch.no_grad():
+            y = self.net.forward(torch.from_numpy(self.params), u).numpy()
+        return self.out_scaler.inverse(y)
+
+    def linear(self) -> tuple[FloatArray, FloatArray]:
+        if self._linear is None:
+            raise ValueError("no linear approximation stored; fit or load one")
+        return self._linear[0].copy(), self._linear[1].copy()
+
+    def set_linear(self, M: FloatArray, o: FloatArray) -> None:
+        """Store a given ``(M, o)`` (e.g. read back from a document's ``linear`` block)."""
+        self._linear = (np.asarray(M, dtype=np.float64), np.asarray(o, dtype=np.float64))
+
+    def set_linear_approximation(
+        self, b_raw_nt: FloatArray, x_hk: FloatArray | None = None
+    ) -> None:
+        """Store the least-squares affine approximation over these samples."""
+        self._linear = best_linear_approximation(self, b_raw_nt, x_hk)
+
+    def to_model(self) -> dict[str, Any]:
+        parts = self.net.unpack(torch.from_numpy(self.params))
+        return {
+            "architecture": f"{self.net.n_in}-{self.net.n_hidden}-{self.net.n_out}"
+            + ("+linear" if self.net.linear_path else ""),
+            "n_hidden": self.net.n_hidden,
+            "activation": self.net.activation,
+            "linear_path": self.net.linear_path,
+            "inputs": ["b_x", "b_y", "b_z", *self.hk_names],
+            "hk_names": list(self.hk_names),
+            "input_scaler": self.in_scaler.to_json(),
+            "output_scaler": self.out_scaler.to_json(),
+            "weights": {k: v.tolist() for k, v in parts.items()},
+            "training": dict(self.training),
+        }
+
+    @classmethod
+    def from_model(cls, method: str, model: dict[str, Any]) -> LMBPCalibration:
+        try:
+            hk = [str(h) for h in model.get("hk_names", [])]
+            net = BPNetwork(
+                n_in=3 + len(hk),
+                n_hidden=int(model["n_hidden"]),
+                activation=model["activation"],
+                linear_path=bool(model["linear_path"]),
+            )
+            parts = {k: torch.tensor(v, dtype=torch.float64) for k, v in model["weights"].items()}
+            params = net.pack(parts).numpy()
+            return cls(
+                method,
+                net,
+                params,
+                MinMaxScaler.from_json(model["input_scaler"]),
+                MinMaxScaler.from_json(model["output_scaler"]),
+                hk_names=hk,
+                training=model.get("training", {}),
+            )
+        except (KeyError, ValueError, TypeError, RuntimeError) as exc:
+            raise DocumentError(f"malformed {method} model block: {exc}") from exc
+
+
+def fit_lmbp(
+    data: FitData,
+    *,
+    n_hidden: int = 3,
+    activation: Activation = "tanh",
+    use_hk: bool = False,
+    linear_path: bool | None = None,
+    restarts: int = 1,
+    generator: torch.Generator,
+    options: LMOptions | None = None,
+    warm_start: LMBPCalibration | None = None,
+    callback: Callable[[int, float], None] | None = None,
+) -> LMBPCalibration:
+    """Train the BP network by Levenberg–Marquardt on raw readings → reference field.
+
+    Parameters
+    ----------
+    data
+        Raw readings ``(N, 3)`` [nT] with the body-frame reference field (attitude needed) and,
+        for ``use_hk``, the housekeeping regressors.
+    n_hidden
+        Hidden nodes ``H`` (the paper uses 3).
+    activation
+        ``"tanh"`` (MATLAB ``tansig``) or ``"sigmoid"`` (``logsig``).
+    use_hk
+        Feed the housekeeping regressors as extra inputs (method ``"lmbp-hk"``).
+    linear_path
+        Linear path beside the hidden layer, initialised by least squares; default ``use_hk``.
+    restarts
+        Independent random starts; the lowest training loss wins.
+    generator
+        Seeded ``torch.Generator`` for the initial weights.
+    options
+        LM stopping rules (default: 200 epochs, tolerances of :class:`LMOptions`).
+    warm_start
+        Continue from this calibration's weights and scalers (periodic retraining); its
+        architecture must match.
+    callback
+        ``callback(epoch, mse)`` after each LM epoch.
+
+    Returns
+    -------
+    LMBPCalibration
+        With ``training`` = epochs, final normalised MSE, stop reason, restarts.
+    """
+    method = "lmbp-hk" if use_hk else "lmbp"
+    if data.b_ref_body_nt is None:
+        raise MissingAttitudeError(method)
+    hk_names = list(data.hk_names) if use_hk else []
+    x_in = (
+        np.hstack([data.b_raw_nt, data.x_hk])
+        if use_hk and data.x_hk is not None
+        else (data.b_raw_nt)
+    )
+    lin = use_hk if linear_path is None else linear_path
+    net = BPNetwork(x_in.shape[1], n_hidden, activation, lin)
+    if data.n * 3 < 2 * net.n_params:
+        raise TooFewSamplesError(method, data.n, math.ceil(2 * net.n_params / 3))
+
+    if warm_start is not None:
+        if warm_start.net != net:
+            raise ValueError(f"warm start architecture {warm_start.net} differs from {net}")
+        in_scaler, out_scaler = warm_start.in_scaler, warm_start.out_scaler
+    else:
+        in_scaler, out_scaler = MinMaxScaler.fit(x_in), MinMaxScaler.fit(data.b_ref_body_nt)
+    u = torch.from_numpy(in_scaler.forward(x_in))
+    t = torch.from_numpy(out_scaler.forward(data.b_ref_body_nt))
+    problem = NetworkProblem(net, u, t)
+
+    linear_init = None
+    if lin:
+        U = torch.cat([u, torch.ones(u.shape[0], 1, dtype=torch.float64)], dim=1)
+        coef = torch.linalg.lstsq(U, t).solution  # (n_in + 1, 3)
+        linear_init = (coef[:-1].T.contiguous(), coef[-1].clone())
+
+    best: LMResult | None = None
+    starts: list[torch.Tensor] = []
+    if warm_start is not None:
+        starts.append(torch.from_numpy(warm_start.params.copy()))
+    else:
+        starts = [net.init_params(generator, linear_init=linear_init) for _ in range(restarts)]
+    for w0 in starts:
+        result = levenberg_marquardt(problem, w0, options=options, callback=callback)
+        if best is None or result.loss < best.loss:
+            best = result
+    assert best is not None
+    cal = LMBPCalibration(
+        method,
+        net,
+        best.params.numpy(),
+        in_scaler,
+        out_scaler,
+        hk_names=hk_names,
+        training={
+            "epochs": best.epochs,
+            "mse_normalised": best.mse,
+            "stop_reason": best.stop_reason,
+            "restarts": len(starts),
+            "warm_start": warm_start is not None,
+        },
+    )
+    cal.set_linear_approximation(data.b_raw_nt, data.x_hk if use_hk else None)
+    return cal
