@@ -3,8 +3,8 @@
 ``OnlineEllipsoid`` follows the patent of Chen Zhongxue (CN, 2023, "Neural-network autonomous
 calibration of a three-axis MEMS magnetometer", seed ``002``): ellipsoid parameters ``η`` are
 updated one sample at a time from the vector ``D`` of quadratic and linear terms of the reading
-``m``, the error is taken against a reference magnitude (the patent's running mean of ‖m‖, eq. of step 52; on
-orbit the model field magnitude of each sample), and the calibration follows from ``η`` as
+``m``, the error is taken against a reference magnitude (the patent's running mean of ‖m‖, step
+52; on orbit the model field magnitude of each sample), and the calibration follows from ``η`` as
 ``A → G = chol(A)``, offset ``X_0``, output ``G (m − X_0)`` (patent steps 9-10).
 
 The patent's formulas for ``D`` and ``η → A`` are images missing from the seed text; we use the
