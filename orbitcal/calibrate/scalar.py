@@ -9,8 +9,9 @@ non-orthogonality and offset.
 calibration", J. Astronaut. Sci. 50(4), 477-490): model ``(I + D) B_k = O A_k H_k + b + ε_k``
 with ``D`` symmetric. The scalar measurement
 ``z_k = |B_k|² − |H_k|² = −B_kᵀ E B_k + 2 B_kᵀ c − |b|²`` with ``E = 2D + D²``,
-``c = (I + D) b`` is linear in ``(E, c, |b|²)``. Step 1 solves it by linear least squares with ``|b|²`` as a free nuisance parameter (their "centred" estimate); step 2 refines
-``(D, b)`` by Gauss–Newton (here :func:`levenberg_marquardt`) on the magnitude residual
+``c = (I + D) b`` is linear in ``(E, c, |b|²)``. Step 1 solves it by linear least squares with
+``|b|²`` as a free nuisance parameter (their "centred" estimate); step 2 refines ``(D, b)`` by
+Gauss–Newton (here :func:`levenberg_marquardt`) on the magnitude residual
 ``|(I + D) B_k − b| − |H_k|``, which carries the sensor noise at unit gain.
 Calibration: ``b_cal = (I + D) B − b``, i.e. ``M = I + D``, ``o = (I + D)⁻¹ b``.
 
