@@ -31,6 +31,7 @@ from orbitcal.field.igrf import IGRF_GENERATIONS, igrf
 __all__ = [
     "DEFAULT_FIELD",
     "FIELD_NAMES",
+    "MAIN_FIELD_NAMES",
     "CompositeField",
     "FieldModel",
     "FieldRangeError",
@@ -41,6 +42,9 @@ __all__ = [
 
 #: The reference field when none is named (CONTRACT section 2).
 DEFAULT_FIELD = "IGRF-14"
+
+#: Core (main) field models: a combined name may hold at most one of them.
+MAIN_FIELD_NAMES: tuple[str, ...] = (*IGRF_GENERATIONS, "CHAOS-8.1")
 
 #: Every model name that ``get_field`` accepts as a term.
 FIELD_NAMES: tuple[str, ...] = (*IGRF_GENERATIONS, "CHAOS-8.1", *CRUSTAL_MODELS, "RC")
@@ -114,6 +118,11 @@ def get_field(name: str = DEFAULT_FIELD) -> FieldModel:
         raise ValueError(f"empty term in field name {name!r}")
     if len(set(terms)) != len(terms):
         raise ValueError(f"field name {name!r} repeats a term")
+    main = [t for t in terms if t in MAIN_FIELD_NAMES]
+    if len(main) > 1:
+        raise ValueError(
+            f"field name {name!r} adds {' and '.join(main)}: both are main-field models; use one"
+        )
     if len(terms) == 1:
         return _single(terms[0])
     return CompositeField(tuple(_single(t) for t in terms))

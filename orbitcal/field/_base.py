@@ -42,6 +42,17 @@ def _iso(mjd2000: float) -> str:
     return t.strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
+def _broadcast_samples(
+    t_utc_s: FloatArray, radius_km: FloatArray, colat_deg: FloatArray, lon_deg: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Broadcast the four sample arrays against each other and flatten them to (N,)."""
+    arrays = np.broadcast_arrays(
+        *(np.asarray(a, dtype=np.float64) for a in (t_utc_s, radius_km, colat_deg, lon_deg))
+    )
+    t, r, c, lo = (np.ascontiguousarray(a).reshape(-1) for a in arrays)
+    return t, r, c, lo
+
+
 class FieldRangeError(ValueError):
     """A sample time lies outside the validity of a field model.
 
@@ -198,8 +209,9 @@ class SphericalHarmonicModel:
         lon_deg: FloatArray,
     ) -> FloatArray:
         """Field at each sample's own time and position, NEC [nT] (see :class:`FieldModel`)."""
-        radius_km = np.asarray(radius_km, dtype=np.float64).reshape(-1)
-        t_utc_s = np.broadcast_to(np.asarray(t_utc_s, dtype=np.float64), radius_km.shape)
+        t_utc_s, radius_km, colat_deg, lon_deg = _broadcast_samples(
+            t_utc_s, radius_km, colat_deg, lon_deg
+        )
         mjd = self.check_range(t_utc_s)
         if self.order == 1 and self._pp_blocks.shape[1] == 1:
             return synth_internal_nec_nt(

@@ -31,7 +31,7 @@ import h5py
 import numpy as np
 from numpy.typing import NDArray
 
-from orbitcal.field._base import FieldRangeError, _iso, utc_s_to_mjd2000
+from orbitcal.field._base import FieldRangeError, _broadcast_samples, _iso, utc_s_to_mjd2000
 from orbitcal.field.synthesis import synth_internal_nec_nt
 
 __all__ = [
@@ -159,10 +159,11 @@ class RingCurrentField:
         lon_deg: FloatArray,
     ) -> FloatArray:
         """Field at each sample, geocentric NEC [nT] (see :class:`orbitcal.field.FieldModel`)."""
-        radius_km = np.asarray(radius_km, dtype=np.float64).reshape(-1)
-        t = np.broadcast_to(np.asarray(t_utc_s, dtype=np.float64), radius_km.shape)
-        colat_rad = np.radians(np.asarray(colat_deg, dtype=np.float64).reshape(-1))
-        lon_rad = np.radians(np.asarray(lon_deg, dtype=np.float64).reshape(-1))
+        t, radius_km, colat_deg, lon_deg = _broadcast_samples(
+            t_utc_s, radius_km, colat_deg, lon_deg
+        )
+        colat_rad = np.radians(colat_deg)
+        lon_rad = np.radians(lon_deg)
         rc_e, rc_i = self.rc_nt(t)
         sm, gsm = sm_gsm_axes_itrs(t)
         q10, q11, s11 = CHAOS7_Q_SM

@@ -251,7 +251,7 @@ def synth_internal_nec_nt(
     colat_deg : ndarray, shape (N,)
         Geocentric colatitude [deg].
     lon_deg : ndarray, shape (N,)
-        Longitude, east [deg].
+        Longitude, east [deg]. The three position arrays broadcast against each other.
     nmax : int
         Maximum degree (``K = nmax (nmax + 3)``).
     nmin : int, optional
@@ -264,12 +264,15 @@ def synth_internal_nec_nt(
     ndarray, shape (N, 3)
         Field in geocentric North, East, Centre (down) [nT].
     """
-    radius_km = np.ascontiguousarray(radius_km, dtype=np.float64).reshape(-1)
-    colat_rad = np.radians(np.asarray(colat_deg, dtype=np.float64).reshape(-1))
-    lon_rad = np.radians(np.asarray(lon_deg, dtype=np.float64).reshape(-1))
+    r_b, c_b, l_b = np.broadcast_arrays(
+        np.asarray(radius_km, dtype=np.float64),
+        np.asarray(colat_deg, dtype=np.float64),
+        np.asarray(lon_deg, dtype=np.float64),
+    )
+    radius_km = np.ascontiguousarray(r_b).reshape(-1)
+    colat_rad = np.radians(c_b).reshape(-1)
+    lon_rad = np.radians(l_b).reshape(-1)
     npts = radius_km.shape[0]
-    if colat_rad.shape[0] != npts or lon_rad.shape[0] != npts:
-        raise ValueError("radius_km, colat_deg and lon_deg must have the same length")
     k = n_block_coeffs(nmax)
     out = np.zeros((npts, 3))
     static: FloatArray | None = None
