@@ -1,0 +1,419 @@
+"""Orbits from TLE or OMM mean elements, propagated with SGP4 (vectorised, many spacecraft).
+
+``Orbit.from_tle(text)`` validates the two lines (layout, length, checksum, matching catalogue
+numbers) and raises :class:`TLEError` saying which line is wrong and why; ``Orbit.from_omm(fields)``
+reads a CCSDS OMM (as parsed by ``sgp4.omm``: XML/CSV rows or a JSON object). ``Orbit.propagate``
+runs SGP4 (Vallado et al. 2006, AIAA 2006-6753; the ``sgp4`` package's C++ core through
+``Satrec.sgp4_array``) at every sample time and returns an :class:`Ephemeris` in TEME and ITRS
+(:func:`orbitcal.frames.teme_to_itrs`). Failures are *per row*: ``error_code`` holds SGP4's code
+(``sgp4.api.SGP4_ERRORS``) and the row's vectors are NaN; :func:`require_valid` turns them into a
+:class:`PropagationError` naming the rows. Elements older or newer than ``max_age_days`` (14 days
+by default) relative to a sample raise a :class:`StaleElementsWarning`.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+import numpy.typing as npt
+from sgp4.api import SGP4_ERRORS, WGS72, Satrec, SatrecArray
+
+from orbitcal.frames import teme_to_itrs
+
+__all__ = [
+    "DEFAULT_MAX_AGE_DAYS",
+    "Ephemeris",
+    "OMMError",
+    "Orbit",
+    "OrbitError",
+    "PropagationError",
+    "Propagator",
+    "StaleElementsWarning",
+    "TLEError",
+    "propagate_many",
+    "require_valid",
+    "tle_checksum",
+]
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+#: Default age [d] beyond which SGP4 elements are reported as stale (LEO TLE accuracy degrades to
+#: km within days; Vallado et al. 2006 discuss 1–3 km at epoch growing ~1–3 km/day).
+DEFAULT_MAX_AGE_DAYS = 14.0
+
+_UNIX_EPOCH_JD = 2_440_587.5
+_DAY_S = 86_400.0
+_TLE_LINE_LENGTH = 69
+
+
+class OrbitError(ValueError):
+    """Base class of orbit errors (bad elements or failed propagation)."""
+
+
+class TLEError(OrbitError):
+    """A two-line element set is malformed; the message names the line and the fault."""
+
+
+class OMMError(OrbitError):
+    """An Orbit Mean-Elements Message lacks a field or holds a malformed value."""
+
+
+class PropagationError(OrbitError):
+    """SGP4 failed at some rows; the message names the rows and SGP4's reason."""
+
+    def __init__(self, message: str, rows: npt.NDArray[np.intp], codes: IntArray) -> None:
+        super().__init__(message)
+        self.rows = rows
+        self.codes = codes
+
+
+class StaleElementsWarning(UserWarning):
+    """Samples lie further from the element set's epoch than the configured age."""
+
+
+@dataclass(frozen=True)
+class Ephemeris:
+    """Positions and velocities at sample times; rows that SGP4 could not compute are NaN.
+
+    Attributes
+    ----------
+    r_teme_km : ndarray, shape (N, 3) (or (M, N, 3) for many spacecraft)
+        Position in TEME [km].
+    v_teme_km_s : ndarray, same shape
+        Velocity in TEME [km/s].
+    r_itrs_km : ndarray, same shape
+        Position in ITRS [km].
+    v_itrs_km_s : ndarray, same shape
+        Velocity relative to the rotating ITRS [km/s].
+    error_code : ndarray of int, shape (N,) (or (M, N))
+        SGP4 error code per row, 0 = success (meanings: ``sgp4.api.SGP4_ERRORS``).
+    t_utc_s : ndarray, shape (N,)
+        The sample times, POSIX seconds of UTC [s].
+    """
+
+    r_teme_km: FloatArray
+    v_teme_km_s: FloatArray
+    r_itrs_km: FloatArray
+    v_itrs_km_s: FloatArray
+    error_code: IntArray
+    t_utc_s: FloatArray
+
+    @property
+    def valid(self) -> npt.NDArray[np.bool_]:
+        """True where SGP4 succeeded."""
+        return np.asarray(self.error_code == 0)
+
+    def require_valid(self) -> Ephemeris:
+        """Return ``self`` if every row is valid, else raise :class:`PropagationError`."""
+        return require_valid(self)
+
+
+class Propagator(Protocol):
+    """Anything that gives an :class:`Ephemeris` at sample times (SGP4 orbits, test fakes)."""
+
+    def propagate(self, t_utc_s: npt.ArrayLike) -> Ephemeris: ...
+
+
+def tle_checksum(line: str) -> int:
+    """TLE checksum of a line's first 68 columns: sum of digits, '-' counts 1, modulo 10."""
+    return sum(int(c) if c.isdigit() else (1 if c == "-" else 0) for c in line[:68]) % 10
+
+
+def _validate_tle_line(line: str, number: int, *, verify_checksum: bool) -> None:
+    label = f"TLE line {number}"
+    if not line.startswith(f"{number} "):
+        raise TLEError(f"{label} must start with '{number} ', got {line[:10]!r}")
+    if len(line) != _TLE_LINE_LENGTH:
+        raise TLEError(
+            f"{label} has {len(line)} characters; a TLE line has exactly {_TLE_LINE_LENGTH}: "
+            f"{line!r}"
+        )
+    if verify_checksum:
+        last = line[68]
+        if not last.isdigit():
+            raise TLEError(f"{label}: column 69 must be the checksum digit, got {last!r}")
+        expected = tle_checksum(line)
+        if int(last) != expected:
+            raise TLEError(
+                f"{label}: checksum is {last} but the line's digits give {expected} "
+                "(the line is corrupted or was edited)"
+            )
+
+
+def _check_age(epoch_utc_s: float, t: FloatArray, max_age_days: float | None, what: str) -> None:
+    if max_age_days is None or t.size == 0:
+        return
+    finite = t[np.isfinite(t)]
+    if finite.size == 0:
+        return
+    age_d = float(np.max(np.abs(finite - epoch_utc_s))) / _DAY_S
+    if age_d > max_age_days:
+        warnings.warn(
+            f"{what}: samples lie up to {age_d:.1f} days from the element epoch (limit "
+            f"{max_age_days:g} days); SGP4 errors grow by km per day — use fresher elements",
+            StaleElementsWarning,
+            stacklevel=3,
+        )
+
+
+def _jd_fr(t_utc_s: FloatArray, ref: Orbit) -> tuple[FloatArray, FloatArray]:
+    """POSIX seconds of UTC → (Julian date, fraction) in UTC, as SGP4 takes them.
+
+    Split relative to the reference orbit's epoch (``jdsatepoch + whole``, ``jdsatepochF +
+    fraction``), so that SGP4's time since epoch is ``t − epoch`` without the rounding of a
+    1e9-second POSIX epoch (which matters for ill-conditioned elements such as Vallado's 33333).
+    """
+    d = (t_utc_s - ref.epoch_utc_s) / _DAY_S
+    whole = np.floor(d)
+    return ref.satrec.jdsatepoch + whole, ref.satrec.jdsatepochF + (d - whole)
+
+
+def _to_itrs(
+    r_teme: FloatArray, v_teme: FloatArray, t: FloatArray, ok: npt.NDArray[np.bool_]
+) -> tuple[FloatArray, FloatArray]:
+    r_itrs = np.full_like(r_teme, np.nan)
+    v_itrs = np.full_like(v_teme, np.nan)
+    if np.any(ok):
+        r_itrs[ok], v_itrs[ok] = teme_to_itrs(r_teme[ok], v_teme[ok], t[ok])
+    return r_itrs, v_itrs
+
+
+@dataclass(frozen=True)
+class Orbit:
+    """One spacecraft's SGP4 mean elements (from a TLE or an OMM).
+
+    Attributes
+    ----------
+    satrec : sgp4.api.Satrec
+        The initialised SGP4 record (WGS72 constants, as the elements were fitted with).
+    norad_id : int
+        NORAD catalogue number.
+    name : str
+        Object name ('' when the TLE had no name line).
+    epoch_utc_s : float
+        Element epoch, POSIX seconds of UTC [s].
+    """
+
+    satrec: Satrec
+    norad_id: int
+    name: str
+    epoch_utc_s: float
+
+    @classmethod
+    def from_tle(cls, text: str, *, name: str | None = None, verify_checksum: bool = True) -> Orbit:
+        """Read a two-line element set, with an optional name line first.
+
+        Parameters
+        ----------
+        text : str
+            Two or three lines (``NAME`` or ``0 NAME``, then lines 1 and 2). Blank lines and
+            trailing whitespace are ignored.
+        name : str, optional
+            Overrides the name line.
+        verify_checksum : bool, keyword-only
+            Check column 69 of both lines (default). Only for known-bad historical sets.
+
+        Raises
+        ------
+        TLEError
+            Naming the line and the fault: wrong count of lines, layout, length, checksum,
+            catalogue numbers that differ between the lines, or elements SGP4 cannot initialise.
+        """
+        if not isinstance(text, str):
+            raise TLEError(f"a TLE must be text, got {type(text).__name__}")
+        lines = [ln.rstrip() for ln in text.strip().splitlines() if ln.strip()]
+        if len(lines) == 3:
+            title, line1, line2 = lines
+            title = title.strip()
+            if title.startswith("0 "):
+                title = title[2:].strip()
+        elif len(lines) == 2:
+            title, (line1, line2) = "", lines
+        else:
+            raise TLEError(
+                f"a TLE has 2 lines (or 3 with a name line first); got {len(lines)} non-blank lines"
+            )
+        _validate_tle_line(line1, 1, verify_checksum=verify_checksum)
+        _validate_tle_line(line2, 2, verify_checksum=verify_checksum)
+        if line1[2:7] != line2[2:7]:
+            raise TLEError(
+                f"TLE line 1 is for catalogue number {line1[2:7]!r} but line 2 for {line2[2:7]!r}"
+            )
+        try:
+            satrec = Satrec.twoline2rv(line1, line2, WGS72)
+        except (ValueError, IndexError) as exc:  # pragma: no cover - sgp4 rarely raises
+            raise TLEError(f"TLE could not be read by SGP4: {exc}") from exc
+        if satrec.error:
+            raise TLEError(
+                f"TLE elements rejected by SGP4 initialisation: error {satrec.error} "
+                f"({SGP4_ERRORS.get(satrec.error, 'unknown')})"
+            )
+        return cls._from_satrec(satrec, name if name is not None else title)
+
+    @classmethod
+    def from_omm(cls, fields: Mapping[str, Any], *, name: str | None = None) -> Orbit:
+        """Read a CCSDS Orbit Mean-Elements Message (one object's fields, as ``sgp4.omm`` reads).
+
+        Parameters
+        ----------
+        fields : mapping
+            Keys such as ``EPOCH`` (``YYYY-MM-DDTHH:MM:SS.ffffff``, UTC), ``MEAN_MOTION``,
+            ``ECCENTRICITY``, ``INCLINATION``, ``RA_OF_ASC_NODE``, ``ARG_OF_PERICENTER``,
+            ``MEAN_ANOMALY``, ``NORAD_CAT_ID``, ``BSTAR``, ``MEAN_MOTION_DOT``,
+            ``MEAN_MOTION_DDOT``, ``CLASSIFICATION_TYPE``, ``OBJECT_ID``, ``EPHEMERIS_TYPE``,
+            ``ELEMENT_SET_NO``, ``REV_AT_EPOCH``; values strings or numbers (CelesTrak JSON).
+
+        Raises
+        ------
+        OMMError
+            Naming the missing or malformed field.
+        """
+        from sgp4 import omm
+
+        if not isinstance(fields, Mapping):
+            raise OMMError(f"an OMM must be a mapping of field names, got {type(fields).__name__}")
+        texts = {str(k).upper(): ("" if v is None else str(v)) for k, v in fields.items()}
+        defaults = {
+            "CLASSIFICATION_TYPE": "U",
+            "EPHEMERIS_TYPE": "0",
+            "ELEMENT_SET_NO": "999",
+            "REV_AT_EPOCH": "0",
+            "MEAN_MOTION_DDOT": "0",
+            "OBJECT_ID": "",
+        }
+        for key, value in defaults.items():
+            texts.setdefault(key, value)
+        satrec = Satrec()
+        try:
+            omm.initialize(satrec, texts)
+        except KeyError as exc:
+            raise OMMError(f"OMM lacks the field {exc.args[0]}") from exc
+        except ValueError as exc:
+            raise OMMError(f"OMM has a malformed value: {exc}") from exc
+        if satrec.error:
+            raise OMMError(
+                f"OMM elements rejected by SGP4 initialisation: error {satrec.error} "
+                f"({SGP4_ERRORS.get(satrec.error, 'unknown')})"
+            )
+        title = name if name is not None else texts.get("OBJECT_NAME", "")
+        return cls._from_satrec(satrec, title)
+
+    @classmethod
+    def _from_satrec(cls, satrec: Satrec, name: str) -> Orbit:
+        epoch_utc_s = (satrec.jdsatepoch - _UNIX_EPOCH_JD) * _DAY_S + satrec.jdsatepochF * _DAY_S
+        return cls(satrec=satrec, norad_id=int(satrec.satnum), name=name, epoch_utc_s=epoch_utc_s)
+
+    def propagate(
+        self, t_utc_s: npt.ArrayLike, *, max_age_days: float | None = DEFAULT_MAX_AGE_DAYS
+    ) -> Ephemeris:
+        """Propagate to sample times with SGP4 (vectorised).
+
+        Parameters
+        ----------
+        t_utc_s : array_like, shape (N,)
+            POSIX seconds of UTC [s].
+        max_age_days : float or None, keyword-only
+            Warn (:class:`StaleElementsWarning`) when a sample is further than this from the
+            epoch [d]; ``None`` disables the check.
+
+        Returns
+        -------
+        Ephemeris
+            Rows with a non-zero ``error_code`` (or a non-finite time, code −1) are NaN.
+        """
+        t = np.atleast_1d(np.asarray(t_utc_s, dtype=np.float64))
+        if t.ndim != 1:
+            raise ValueError(f"t_utc_s must have shape (N,), got {t.shape}")
+        _check_age(self.epoch_utc_s, t, max_age_days, f"NORAD {self.norad_id} {self.name}".strip())
+        finite = np.isfinite(t)
+        jd, fr = _jd_fr(np.where(finite, t, self.epoch_utc_s), self)
+        e, r, v = self.satrec.sgp4_array(jd, fr)
+        error_code = np.asarray(e, dtype=np.int64)
+        error_code[~finite] = -1
+        ok = error_code == 0
+        r = np.where(ok[:, None], r, np.nan)
+        v = np.where(ok[:, None], v, np.nan)
+        r_itrs, v_itrs = _to_itrs(r, v, t, ok)
+        return Ephemeris(r, v, r_itrs, v_itrs, error_code, t)
+
+
+def propagate_many(
+    orbits: Sequence[Orbit],
+    t_utc_s: npt.ArrayLike,
+    *,
+    max_age_days: float | None = DEFAULT_MAX_AGE_DAYS,
+) -> Ephemeris:
+    """Propagate many spacecraft at the same sample times in one ``SatrecArray`` call.
+
+    Parameters
+    ----------
+    orbits : sequence of Orbit, length M
+    t_utc_s : array_like, shape (N,)
+        POSIX seconds of UTC [s].
+    max_age_days : float or None, keyword-only
+        As in :meth:`Orbit.propagate`, checked per spacecraft.
+
+    Returns
+    -------
+    Ephemeris
+        Arrays of shape (M, N, 3) and ``error_code`` (M, N); ``t_utc_s`` (N,).
+    """
+    t = np.atleast_1d(np.asarray(t_utc_s, dtype=np.float64))
+    if t.ndim != 1:
+        raise ValueError(f"t_utc_s must have shape (N,), got {t.shape}")
+    m, n = len(orbits), t.size
+    if m == 0:
+        empty = np.empty((0, n, 3))
+        return Ephemeris(empty, empty, empty, empty, np.empty((0, n), dtype=np.int64), t)
+    for orbit in orbits:
+        _check_age(orbit.epoch_utc_s, t, max_age_days, f"NORAD {orbit.norad_id}")
+    finite = np.isfinite(t)
+    jd, fr = _jd_fr(np.where(finite, t, orbits[0].epoch_utc_s), orbits[0])
+    e, r, v = SatrecArray([o.satrec for o in orbits]).sgp4(jd, fr)
+    error_code = np.asarray(e, dtype=np.int64)
+    error_code[:, ~finite] = -1
+    ok = error_code == 0
+    r = np.where(ok[..., None], r, np.nan)
+    v = np.where(ok[..., None], v, np.nan)
+    t_all = np.broadcast_to(t, (m, n)).reshape(-1)
+    r_itrs, v_itrs = _to_itrs(r.reshape(-1, 3), v.reshape(-1, 3), t_all, ok.reshape(-1))
+    return Ephemeris(r, v, r_itrs.reshape(m, n, 3), v_itrs.reshape(m, n, 3), error_code, t)
+
+
+def _meaning(code: int) -> str:
+    if code == -1:
+        return "the sample time is not a finite number"
+    return SGP4_ERRORS.get(code, f"unknown SGP4 error {code}")
+
+
+def require_valid(eph: Ephemeris, *, max_listed: int = 10) -> Ephemeris:
+    """Return ``eph`` if SGP4 succeeded at every row; else raise :class:`PropagationError`.
+
+    The message names the failed rows (0-based; ``(spacecraft, row)`` for many spacecraft), SGP4's
+    code and its meaning, and what to do.
+    """
+    bad = np.argwhere(eph.error_code != 0)
+    if bad.size == 0:
+        return eph
+    codes = eph.error_code[tuple(bad.T)]
+    parts = []
+    for code in np.unique(codes):
+        where = bad[codes == code]
+        listed = [
+            str(int(w[0])) if w.size == 1 else str(tuple(int(x) for x in w))
+            for w in where[:max_listed]
+        ]
+        more = f" and {len(where) - max_listed} more" if len(where) > max_listed else ""
+        parts.append(f"error {int(code)} ({_meaning(int(code))}) at rows {', '.join(listed)}{more}")
+    message = (
+        f"SGP4 failed at {len(bad)} of {eph.error_code.size} samples: "
+        + "; ".join(parts)
+        + ". Use elements with an epoch close to the data, or positions (r_x, r_y, r_z)."
+    )
+    rows = bad[:, -1] if bad.shape[1] == 1 else bad
+    raise PropagationError(message, rows=np.asarray(rows), codes=codes)
