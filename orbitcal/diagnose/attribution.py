@@ -1,0 +1,627 @@
+"""Attribution: which effect explains the calibrated residual, judged on held-out later blocks.
+
+Every candidate of the catalogue (:mod:`orbitcal.diagnose.effects`) is fitted *jointly* with the
+12-parameter calibration (``b_raw = A b_ref + o + G c``) on the training time blocks and judged by
+how much it shrinks the residual on the later, held-out blocks that no fit saw (``docs/design.md``:
+held-out data are always later time blocks, never random rows).
+
+Greedy forward selection adds, one at a time, the candidate with the lowest held-out RMS among those
+that beat the current model *significantly*: the held-out span is cut into consecutive chunks, the
+per-chunk drop of the mean squared residual is tested with a one-sided t-test (Bonferroni over the
+candidates of the step), and the RMS must shrink by at least ``min_gain``. When nothing passes, no
+effect is named (verdict ``"none"``). The selected set is then scored drop-one (each effect's unique
+contribution).
+
+Split-fit tests expose effects the 12 parameters absorb so that the residual alone hides them:
+the calibration is fitted separately on sunlit and eclipse samples, on attitude regimes and on
+consecutive time blocks, and the biases and scale factors are compared against their uncertainty.
+
+All fits are iteratively reweighted least squares with Huber weights (k = 2.5 sigma, sigma from the
+median absolute deviation), so a localised disturbance such as an auroral crossing cannot drag the
+calibration of the rest of the orbit.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from scipy import stats
+
+from orbitcal.diagnose.effects import (
+    CATALOGUE,
+    FIELD_SCALE_NT,
+    DesignBlock,
+    DiagnosisData,
+    Effect,
+)
+
+__all__ = [
+    "Attribution",
+    "EffectScore",
+    "JointFit",
+    "SplitFit",
+    "attribute",
+    "fit_joint",
+    "split_fit_tests",
+    "time_blocks",
+    "vector_rms_nt",
+]
+
+FloatArray = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
+
+
+def vector_rms_nt(r_nt: FloatArray) -> float:
+    """Root mean square of the vector residual magnitude, ``sqrt(mean |r|^2)`` [nT]."""
+    if r_nt.size == 0:
+        return float("nan")
+    return float(np.sqrt(np.mean(np.sum(r_nt**2, axis=-1))))
+
+
+def time_blocks(
+    t_utc_s: FloatArray, *, n_blocks: int = 10, holdout_blocks: int = 3
+) -> tuple[BoolArray, BoolArray, npt.NDArray[np.intp]]:
+    """Cut the time span into equal-duration blocks; the last ``holdout_blocks`` are held out.
+
+    Returns
+    -------
+    train : ndarray of bool, shape (N,)
+    holdout : ndarray of bool, shape (N,)
+    block : ndarray of int, shape (N,)
+        Block index 0 .. n_blocks-1 of every sample.
+    """
+    t = np.asarray(t_utc_s, dtype=float)
+    span = float(t[-1] - t[0]) or 1.0
+    block = np.minimum(((t - t[0]) / span * n_blocks).astype(np.intp), n_blocks - 1)
+    holdout = block >= n_blocks - holdout_blocks
+    return ~holdout, holdout, block
+
+
+@dataclass(frozen=True)
+class JointFit:
+    """A joint fit of the 12-parameter calibration and some effects.
+
+    Attributes
+    ----------
+    a : ndarray, shape (3, 3)
+        ``b_raw = a @ b_ref + o + ...`` [-].
+    o_nt : ndarray, shape (3,)
+        Offsets [nT].
+    blocks : list of DesignBlock
+        The effect design blocks, in order.
+    coef : list of ndarray
+        Effect parameters per block, in the block's parameter units.
+    sigma_nt : float
+        Robust scale of the training residual per component [nT].
+    cov_cal : ndarray, shape (12, 12)
+        Covariance of ``(a.ravel(), o)`` from the fit, assuming white residuals.
+    """
+
+    a: FloatArray
+    o_nt: FloatArray
+    blocks: list[DesignBlock]
+    coef: list[FloatArray]
+    sigma_nt: float
+    cov_cal: FloatArray
+
+    def effect_nt(self, k: int, g: FloatArray | None = None) -> FloatArray:
+        """The field block ``k`` adds at every sample [nT], shape (N, 3)."""
+        gk = self.blocks[k].g if g is None else g
+        return np.asarray(gk @ self.coef[k])
+
+    def predict_nt(self, data: DiagnosisData) -> FloatArray:
+        """Modelled raw measurement for all samples of ``data`` (the fitted sample set) [nT]."""
+        pred = data.b_ref_body_nt @ self.a.T + self.o_nt
+        for k in range(len(self.blocks)):
+            pred = pred + self.effect_nt(k)
+        return np.asarray(pred)
+
+
+def _design(data: DiagnosisData, blocks: Sequence[DesignBlock]) -> tuple[FloatArray, FloatArray]:
+    """Stacked design matrix (3N, 12 + sum p) with unit-scaled columns, and the column scales."""
+    n = data.n
+    b = data.b_ref_body_nt / FIELD_SCALE_NT
+    p = 12 + sum(len(bl.names) for bl in blocks)
+    x = np.zeros((n, 3, p))
+    for i in range(3):
+        x[:, i, 3 * i : 3 * i + 3] = b
+        x[:, i, 9 + i] = 1.0
+    col = 12
+    for bl in blocks:
+        q = len(bl.names)
+        x[:, :, col : col + q] = bl.g
+        col += q
+    x2 = x.reshape(3 * n, p)
+    scale = np.sqrt(np.mean(x2**2, axis=0))
+    scale[scale == 0.0] = 1.0
+    return x2 / scale, scale
+
+
+def fit_joint(
+    data: DiagnosisData,
+    fit_mask: BoolArray,
+    blocks: Sequence[DesignBlock] = (),
+    *,
+    robust: bool = True,
+    iterations: int = 4,
+) -> JointFit:
+    """Fit the 12 calibration parameters and the effect parameters on the samples ``fit_mask``.
+
+    Parameters
+    ----------
+    data : DiagnosisData
+        All samples; ``blocks`` must be built on the same samples.
+    fit_mask : ndarray of bool, shape (N,)
+        Samples the fit may see.
+    blocks : sequence of DesignBlock
+        Effect regressors.
+    robust : bool
+        Huber reweighting (k = 2.5 sigma), else plain least squares.
+    """
+    x_all, scale = _design(data, blocks)
+    rows = np.repeat(fit_mask, 3)
+    x = x_all[rows]
+    y = data.b_raw_nt[fit_mask].reshape(-1)
+    w = np.ones_like(y)
+    theta = np.zeros(x.shape[1])
+    sigma = 1.0
+    for it in range(iterations if robust else 1):
+        sw = np.sqrt(w)
+        theta = np.linalg.lstsq(x * sw[:, None], y * sw, rcond=None)[0].astype(float)
+        r = y - x @ theta
+        sigma = max(float(1.4826 * np.median(np.abs(r - np.median(r)))), 1e-6)
+        if not robust or it == iterations - 1:
+            break
+        u = np.abs(r) / (2.5 * sigma)
+        w = np.where(u <= 1.0, 1.0, 1.0 / np.maximum(u, 1e-12))
+    # Covariance of the calibration parameters (white-noise assumption; the split tests inflate it).
+    xw = x * np.sqrt(w)[:, None]
+    try:
+        cov_scaled = np.linalg.pinv(xw.T @ xw) * sigma**2
+    except np.linalg.LinAlgError:  # pragma: no cover - pinv converges for finite input
+        cov_scaled = np.full((x.shape[1], x.shape[1]), np.nan)
+    cov = cov_scaled / np.outer(scale, scale)
+    theta = theta / scale
+    a = theta[:9].reshape(3, 3) / FIELD_SCALE_NT
+    cov_cal = cov[:12, :12].copy()
+    cov_cal[:9, :] /= FIELD_SCALE_NT
+    cov_cal[:, :9] /= FIELD_SCALE_NT
+    coef = []
+    col = 12
+    for bl in blocks:
+        q = len(bl.names)
+        coef.append(theta[col : col + q])
+        col += q
+    return JointFit(
+        a=a, o_nt=theta[9:12], blocks=list(blocks), coef=coef, sigma_nt=sigma, cov_cal=cov_cal
+    )
+
+
+def _train_rss(data: DiagnosisData, train: BoolArray, blocks: Sequence[DesignBlock]) -> float:
+    fit = fit_joint(data, train, blocks, robust=False)
+    r = data.b_raw_nt[train] - fit.predict_nt(data)[train]
+    return float(np.sum(r**2))
+
+
+def _resolve(
+    data: DiagnosisData, train: BoolArray, fixed: Sequence[DesignBlock], block: DesignBlock
+) -> DesignBlock:
+    """Pick among a block's alternatives by the training residual (never the held-out one)."""
+    if not block.alternatives:
+        return block
+    options = [block, *block.alternatives]
+    rss = [_train_rss(data, train, [*fixed, opt]) for opt in options]
+    return options[int(np.argmin(rss))]
+
+
+@dataclass(frozen=True)
+class EffectScore:
+    """One candidate's verdict.
+
+    Attributes
+    ----------
+    name : str
+    significant : bool
+        Selected by the greedy forward selection.
+    holdout_rms_before_nt, holdout_rms_after_nt : float
+        Held-out vector RMS without and with the effect [nT]. For a selected effect "before" is the
+        model of the previous selection step; for the others it is the baseline.
+    p_value : float
+        One-sided t-test of the per-chunk drop of the held-out mean square.
+    params : dict
+        Fitted parameters (units in the names) and the model variant.
+    unique_rms_increase_nt : float
+        Drop-one: how much the held-out RMS grows when this effect alone is removed from the
+        selected set [nT] (0 for effects not selected).
+    step : int
+        1-based selection step, 0 when not selected.
+    """
+
+    name: str
+    significant: bool
+    holdout_rms_before_nt: float
+    holdout_rms_after_nt: float
+    p_value: float
+    params: dict[str, Any]
+    unique_rms_increase_nt: float = 0.0
+    step: int = 0
+
+    @property
+    def shrink(self) -> float:
+        """before / after on held-out data [-]."""
+        return float(self.holdout_rms_before_nt / max(self.holdout_rms_after_nt, 1e-12))
+
+
+@dataclass(frozen=True)
+class SplitFit:
+    """A split-fit test: the calibration fitted separately on two or more subsets.
+
+    Attributes
+    ----------
+    name : str
+        ``"sunlit_vs_eclipse"``, ``"attitude_regimes"`` or ``"time_blocks"``.
+    labels : list of str
+        Subset labels.
+    offsets_nt : list of list of float
+        Fitted offsets ``o`` per subset [nT].
+    scales : list of list of float
+        Diagonal of ``A`` per subset [-].
+    max_offset_difference_nt : float
+        Largest per-axis offset difference between subsets [nT].
+    z : float
+        That difference over its standard error (inflated for correlated residuals).
+    flagged : bool
+        The subsets disagree beyond ``z_threshold`` and ``min_difference_nt``.
+    """
+
+    name: str
+    labels: list[str]
+    offsets_nt: list[list[float]]
+    scales: list[list[float]]
+    max_offset_difference_nt: float
+    z: float
+    flagged: bool
+
+
+@dataclass(frozen=True)
+class Attribution:
+    """Result of :func:`attribute`.
+
+    Attributes
+    ----------
+    baseline_rms_nt : float
+        Held-out vector RMS of the 12-parameter calibration alone [nT].
+    baseline_train_rms_nt : float
+        The same on the training blocks [nT].
+    verdict : str
+        The first selected effect, or ``"none"``.
+    effects : list of EffectScore
+        Ranked: selected effects in selection order, then the others by held-out shrink.
+    selected : list of str
+    final_rms_nt : float
+        Held-out RMS of the calibration plus every selected effect [nT].
+    train, holdout : ndarray of bool
+    baseline_residual_nt, final_residual_nt : ndarray, shape (N, 3)
+        Residuals of the baseline and of the final model at every sample [nT].
+    split_fits : list of SplitFit
+    fits : dict
+        ``"baseline"`` and ``"final"`` JointFit objects.
+    """
+
+    baseline_rms_nt: float
+    baseline_train_rms_nt: float
+    verdict: str
+    effects: list[EffectScore]
+    selected: list[str]
+    final_rms_nt: float
+    train: BoolArray
+    holdout: BoolArray
+    baseline_residual_nt: FloatArray
+    final_residual_nt: FloatArray
+    split_fits: list[SplitFit] = field(default_factory=list)
+    fits: dict[str, JointFit] = field(default_factory=dict)
+
+
+def _chunk_test(r_before: FloatArray, r_after: FloatArray, n_chunks: int) -> tuple[float, float]:
+    """One-sided test that the held-out squared residual drops; returns (p, mean log ratio).
+
+    The held-out samples (those in the candidate's support) are cut into ``n_chunks`` consecutive
+    chunks; in each, ``log(mean |r_before|^2 / mean |r_after|^2)`` is taken, and a one-sided
+    Wilcoxon signed-rank test asks whether these are centred above zero. Chunks span several
+    correlation times, so they are close to independent; the log ratio and the rank test keep
+    chunks of very different disturbance level (a patchy crust, auroral crossings) comparable.
+    """
+    e_b = np.sum(r_before**2, axis=1)
+    e_a = np.sum(r_after**2, axis=1)
+    chunks = [c for c in np.array_split(np.arange(e_b.size), n_chunks) if c.size]
+    d = np.array(
+        [np.log(max(np.mean(e_b[c]), 1e-300) / max(np.mean(e_a[c]), 1e-300)) for c in chunks]
+    )
+    if d.size < 5:
+        return 1.0, float(np.mean(d)) if d.size else 0.0
+    mean = float(np.mean(d))
+    if np.all(d == 0.0):
+        return 1.0, mean
+    res = stats.wilcoxon(d, alternative="greater", zero_method="zsplit")
+    return float(res.pvalue), mean
+
+
+def _support(block: DesignBlock) -> BoolArray:
+    """Samples where an effect's regressors are not negligible (all, for global effects)."""
+    mag = np.max(np.abs(block.g), axis=(1, 2))
+    peak = float(np.max(mag, initial=0.0))
+    return np.asarray(mag > 1e-2 * peak) if peak > 0 else np.ones(mag.shape, dtype=bool)
+
+
+def _params(fit: JointFit, k: int) -> dict[str, Any]:
+    bl = fit.blocks[k]
+    out: dict[str, Any] = {n: float(v) for n, v in zip(bl.names, fit.coef[k], strict=True)}
+    if bl.variant:
+        out["variant"] = bl.variant
+    return out
+
+
+def attribute(
+    data: DiagnosisData,
+    *,
+    candidates: Sequence[Effect] = CATALOGUE,
+    n_blocks: int = 10,
+    holdout_blocks: int = 3,
+    n_chunks: int = 16,
+    alpha: float = 0.01,
+    min_gain: float = 0.03,
+    max_steps: int = 3,
+    robust: bool = True,
+    split_tests: bool = True,
+) -> Attribution:
+    """Attribute the calibration residual to catalogue effects, judged on held-out later blocks.
+
+    Parameters
+    ----------
+    data : DiagnosisData
+        Time-ordered samples.
+    candidates : sequence of Effect
+        The models to try (default: the whole catalogue; those without their witness drop out).
+    n_blocks, holdout_blocks : int
+        Equal-duration time blocks; the last ``holdout_blocks`` are held out.
+    n_chunks : int
+        Consecutive chunks of the held-out span for the significance test.
+    alpha : float
+        Family-wise significance level per selection step (Bonferroni over candidates).
+    min_gain : float
+        Minimum relative drop of the held-out RMS for an effect to be named [-].
+    max_steps : int
+        At most this many effects are selected.
+    robust : bool
+        Huber-reweighted fits.
+    split_tests : bool
+        Also run the split-fit tests.
+    """
+    train, holdout, _ = time_blocks(data.t_utc_s, n_blocks=n_blocks, holdout_blocks=holdout_blocks)
+    if int(train.sum()) < 30 or int(holdout.sum()) < 2 * n_chunks:
+        raise ValueError(
+            f"too few samples for held-out attribution ({int(train.sum())} training, "
+            f"{int(holdout.sum())} held out); provide a longer time span"
+        )
+    base = fit_joint(data, train, (), robust=robust)
+    r_base = data.b_raw_nt - base.predict_nt(data)
+    base_rms = vector_rms_nt(r_base[holdout])
+
+    designs: dict[str, DesignBlock] = {}
+    for eff in candidates:
+        block = eff.design(data, train)
+        if block is not None and np.all(np.isfinite(block.g)):
+            designs[eff.name] = block
+
+    def evaluate(
+        fixed: list[DesignBlock], block: DesignBlock
+    ) -> tuple[JointFit, FloatArray, float]:
+        chosen = _resolve(data, train, fixed, block)
+        fit = fit_joint(data, train, [*fixed, chosen], robust=robust)
+        r = data.b_raw_nt - fit.predict_nt(data)
+        return fit, r, vector_rms_nt(r[holdout])
+
+    # Single-effect scores against the baseline (also the first greedy step).
+    single: dict[str, tuple[JointFit, FloatArray, float, float]] = {}
+    for name, block in designs.items():
+        fit, r, rms = evaluate([], block)
+        sup = holdout & _support(fit.blocks[-1])
+        p, _ = _chunk_test(r_base[sup], r[sup], n_chunks)
+        single[name] = (fit, r, rms, p)
+
+    selected: list[str] = []
+    chosen_blocks: list[DesignBlock] = []
+    step_scores: list[EffectScore] = []
+    current_r = r_base
+    current_rms = base_rms
+    current_fit = base
+    for step in range(1, max_steps + 1):
+        remaining = [n for n in designs if n not in selected]
+        if not remaining:
+            break
+        level = alpha / len(remaining)
+        best: tuple[str, JointFit, FloatArray, float, float] | None = None
+        for name in remaining:
+            if step == 1:
+                fit, r, rms, p = single[name]
+            else:
+                fit, r, rms = evaluate(chosen_blocks, designs[name])
+                sup = holdout & _support(fit.blocks[-1])
+                p, _ = _chunk_test(current_r[sup], r[sup], n_chunks)
+            passes = p < level and rms < current_rms * (1.0 - min_gain)
+            if passes and (best is None or rms < best[3]):
+                best = (name, fit, r, rms, p)
+        if best is None:
+            break
+        name, fit, r, rms, p = best
+        selected.append(name)
+        chosen_blocks.append(fit.blocks[-1])
+        step_scores.append(
+            EffectScore(
+                name, True, current_rms, rms, p, _params(fit, len(fit.blocks) - 1), step=step
+            )
+        )
+        current_r, current_rms, current_fit = r, rms, fit
+
+    # Drop-one unique contributions of the selected set.
+    unique: dict[str, float] = {}
+    if len(selected) == 1:
+        unique[selected[0]] = base_rms - current_rms
+    elif len(selected) > 1:
+        for k, name in enumerate(selected):
+            others = [b for j, b in enumerate(chosen_blocks) if j != k]
+            fit = fit_joint(data, train, others, robust=robust)
+            r = data.b_raw_nt - fit.predict_nt(data)
+            unique[name] = vector_rms_nt(r[holdout]) - current_rms
+
+    effects: list[EffectScore] = []
+    for k, sc in enumerate(step_scores):
+        params = _params(current_fit, k)  # final joint values
+        effects.append(
+            EffectScore(
+                sc.name,
+                True,
+                sc.holdout_rms_before_nt,
+                sc.holdout_rms_after_nt,
+                sc.p_value,
+                params,
+                unique_rms_increase_nt=unique.get(sc.name, 0.0),
+                step=sc.step,
+            )
+        )
+    rest = sorted((n for n in single if n not in selected), key=lambda n: single[n][2])
+    for name in rest:
+        fit, _, rms, p = single[name]
+        effects.append(EffectScore(name, False, base_rms, rms, p, _params(fit, 0)))
+
+    splits = split_fit_tests(data, robust=robust) if split_tests else []
+    return Attribution(
+        baseline_rms_nt=base_rms,
+        baseline_train_rms_nt=vector_rms_nt(r_base[train]),
+        verdict=selected[0] if selected else "none",
+        effects=effects,
+        selected=selected,
+        final_rms_nt=current_rms,
+        train=train,
+        holdout=holdout,
+        baseline_residual_nt=r_base,
+        final_residual_nt=current_r,
+        split_fits=splits,
+        fits={"baseline": base, "final": current_fit},
+    )
+
+
+def _autocorr_inflation(r: FloatArray, max_lag: int = 200) -> float:
+    """Variance inflation of a mean for correlated residuals, 1 + 2 sum rho_k (Bartlett cut)."""
+    x = r - np.mean(r)
+    var = float(np.mean(x**2))
+    if var == 0.0 or x.size < 4:
+        return 1.0
+    total = 1.0
+    for k in range(1, min(max_lag, x.size // 4)):
+        rho = float(np.mean(x[:-k] * x[k:])) / var
+        if rho < 0.05:
+            break
+        total += 2.0 * rho
+    return total
+
+
+def _split(
+    data: DiagnosisData,
+    masks: list[BoolArray],
+    labels: list[str],
+    name: str,
+    *,
+    robust: bool,
+    z_threshold: float,
+    min_difference_nt: float,
+) -> SplitFit | None:
+    if len(masks) < 2 or any(int(m.sum()) < 30 for m in masks):
+        return None
+    fits = [fit_joint(data, m, (), robust=robust) for m in masks]
+    offsets = np.array([f.o_nt for f in fits])
+    var = []
+    for f, m in zip(fits, masks, strict=True):
+        r = (data.b_raw_nt - f.predict_nt(data))[m]
+        infl = max(_autocorr_inflation(r[:, k]) for k in range(3))
+        var.append(np.diag(f.cov_cal)[9:12] * infl)
+    var_arr = np.array(var)
+    best_z = 0.0
+    best_d = 0.0
+    for i in range(len(fits)):
+        for j in range(i + 1, len(fits)):
+            d = np.abs(offsets[i] - offsets[j])
+            se = np.sqrt(var_arr[i] + var_arr[j])
+            z = d / np.maximum(se, 1e-9)
+            k = int(np.argmax(z))
+            if z[k] > best_z:
+                best_z, best_d = float(z[k]), float(d[k])
+    return SplitFit(
+        name=name,
+        labels=labels,
+        offsets_nt=offsets.round(3).tolist(),
+        scales=[np.diag(f.a).round(6).tolist() for f in fits],
+        max_offset_difference_nt=best_d,
+        z=best_z,
+        flagged=bool(best_z > z_threshold and best_d > min_difference_nt),
+    )
+
+
+def body_rate_rad_s(data: DiagnosisData) -> FloatArray:
+    """Magnitude of the body rotation rate relative to ITRS [rad/s], per sample."""
+    r = data.rot_itrs_to_body
+    rel = np.einsum("nij,nkj->nik", r[1:], r[:-1])
+    angle = np.arccos(np.clip((np.trace(rel, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0))
+    rate = angle / np.diff(data.t_utc_s)
+    return np.concatenate([rate[:1], rate])
+
+
+def split_fit_tests(
+    data: DiagnosisData,
+    *,
+    robust: bool = True,
+    z_threshold: float = 5.0,
+    min_difference_nt: float = 1.0,
+    n_time_blocks: int = 4,
+) -> list[SplitFit]:
+    """Split-fit tests for effects the 12 parameters absorb.
+
+    * ``sunlit_vs_eclipse``: Sun-driven and thermal fields shift the biases in sunlight.
+    * ``attitude_regimes``: a time offset or misalignment at one body rate looks like a bias; two
+      regimes of body rate (slow vs fast quartiles, when they differ by > 3x) disagree.
+    * ``time_blocks``: consecutive blocks (weeks for long spans) disagree under parameter drift.
+    """
+    out: list[SplitFit] = []
+    kw = {"robust": robust, "z_threshold": z_threshold, "min_difference_nt": min_difference_nt}
+    if data.sunlit is not None:
+        lit = np.asarray(data.sunlit, dtype=bool)
+        s = _split(data, [lit, ~lit], ["sunlit", "eclipse"], "sunlit_vs_eclipse", **kw)  # type: ignore[arg-type]
+        if s is not None:
+            out.append(s)
+    rate = body_rate_rad_s(data)
+    lo, hi = np.quantile(rate, [0.25, 0.75])
+    if lo > 0 and hi / lo > 3.0:
+        s = _split(
+            data,
+            [rate <= lo, rate >= hi],
+            ["slow", "fast"],
+            "attitude_regimes",
+            **kw,  # type: ignore[arg-type]
+        )
+        if s is not None:
+            out.append(s)
+    span_days = float(data.t_utc_s[-1] - data.t_utc_s[0]) / 86400.0
+    n_blocks = (
+        int(min(max(span_days / 7.0, n_time_blocks), 52)) if span_days > 28 else n_time_blocks
+    )
+    _, _, block = time_blocks(data.t_utc_s, n_blocks=n_blocks, holdout_blocks=0)
+    masks = [block == b for b in range(n_blocks)]
+    unit = "week" if span_days > 28 else "block"
+    s = _split(data, masks, [f"{unit} {b + 1}" for b in range(n_blocks)], "time_blocks", **kw)  # type: ignore[arg-type]
+    if s is not None:
+        out.append(s)
+    return out

@@ -1,0 +1,637 @@
+"""The effects catalogue: one candidate model per CONTRACT section-5 name, with its witness.
+
+Every candidate is a *linear* extension of the 12-parameter calibration. The forward model of the
+raw measurement, per sensor axis ``i`` and sample ``n``, is
+
+    b_raw[n, i] = sum_j A[i, j] b_ref[n, j] + o[i] + sum_k c[k] G[n, i, k] + noise
+
+where ``b_ref`` is the reference field in the body frame [nT], ``A`` (3x3) and ``o`` (3) are the 12
+calibration parameters and ``G`` (N, 3, p) is the effect's design block (its *regressors*) with the
+``p`` effect parameters ``c``. Effects that physically add a field outside the sensor (external,
+crustal, field-aligned currents, Sun-driven) and effects inside it (temperature, magnetorquer,
+nonlinearity, drift) are both written this way: with ``A`` close to identity the distinction changes
+the parameters by the (small) calibration error only.
+
+Each effect declares its *witness*: the data it needs (a temperature channel, magnetorquer commands,
+the Sun direction, a crustal model ...). An effect whose witness is missing is not a candidate.
+
+Geometry helpers use a centred dipole whose north geomagnetic pole is fixed at 80.65 N, 72.68 W
+(IGRF-14 at 2020.0, Alken et al. 2021 table 2 pole position rounded; the pole moves by < 0.3 deg
+over 2015-2025, far below what the magnetic-latitude bands and the ring-current axis need).
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+import numpy.typing as npt
+
+__all__ = [
+    "CATALOGUE",
+    "DIPOLE_POLE_LAT_DEG",
+    "DIPOLE_POLE_LON_DEG",
+    "EFFECT_NAMES",
+    "DesignBlock",
+    "DiagnosisData",
+    "Effect",
+    "dipole_axis_itrs",
+    "get_effect",
+    "magnetic_latitude_deg",
+    "nec_basis_itrs",
+]
+
+FloatArray = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
+
+#: Geographic latitude and longitude of the north geomagnetic (dipole) pole [deg], IGRF-14 2020.0.
+DIPOLE_POLE_LAT_DEG = 80.65
+DIPOLE_POLE_LON_DEG = -72.68
+
+#: Field scale used to keep design columns near unit size [nT].
+FIELD_SCALE_NT = 5.0e4
+
+#: Every effect name of CONTRACT section 5 except ``none``, in catalogue order.
+EFFECT_NAMES: tuple[str, ...] = (
+    "temperature",
+    "magnetorquer",
+    "time_offset",
+    "external_field",
+    "crustal_field",
+    "sun_driven",
+    "nonlinearity",
+    "orbit_error",
+    "parameter_drift",
+    "field_aligned_currents",
+    "attitude_error",
+)
+
+SECONDS_PER_DAY = 86400.0
+
+
+def dipole_axis_itrs() -> FloatArray:
+    """Unit vector of the geomagnetic dipole axis (towards the north geomagnetic pole), ITRS.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        ITRS x, y, z components [-].
+    """
+    lat = np.radians(DIPOLE_POLE_LAT_DEG)
+    lon = np.radians(DIPOLE_POLE_LON_DEG)
+    return np.array([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)])
+
+
+def magnetic_latitude_deg(r_itrs_km: FloatArray) -> FloatArray:
+    """Centred-dipole magnetic latitude [deg] of ITRS positions ``(..., 3)`` [km]."""
+    r_hat = r_itrs_km / np.linalg.norm(r_itrs_km, axis=-1, keepdims=True)
+    return np.degrees(np.arcsin(np.clip(r_hat @ dipole_axis_itrs(), -1.0, 1.0)))
+
+
+def nec_basis_itrs(r_itrs_km: FloatArray) -> FloatArray:
+    """Geocentric North, East, Centre unit vectors at ITRS positions.
+
+    Parameters
+    ----------
+    r_itrs_km : ndarray, shape (N, 3)
+        Positions, ITRS [km].
+
+    Returns
+    -------
+    ndarray, shape (N, 3, 3)
+        ``basis[n, k]`` is the k-th unit vector (k = 0 North, 1 East, 2 Centre = down) in ITRS, so
+        ``b_itrs = b_nec @ basis`` and ``b_nec = basis @ b_itrs`` per sample.
+    """
+    r = np.asarray(r_itrs_km, dtype=float)
+    up = r / np.linalg.norm(r, axis=-1, keepdims=True)
+    z = np.array([0.0, 0.0, 1.0])
+    east = np.cross(z, up)
+    east /= np.linalg.norm(east, axis=-1, keepdims=True)
+    north = np.cross(up, east)
+    return np.stack([north, east, -up], axis=-2)
+
+
+def _segments(t_s: FloatArray) -> list[slice]:
+    """Contiguous runs of samples (a gap longer than 3 median steps starts a new run)."""
+    if t_s.size < 2:
+        return [slice(0, t_s.size)]
+    dt = np.diff(t_s)
+    step = float(np.median(dt))
+    cuts = np.flatnonzero(dt > 3.0 * step) + 1
+    edges = [0, *cuts.tolist(), t_s.size]
+    return [slice(a, b) for a, b in itertools.pairwise(edges)]
+
+
+def _time_derivative(t_s: FloatArray, y: FloatArray) -> FloatArray:
+    """d y / d t per contiguous segment (second-order central differences) [unit of y / s]."""
+    out = np.zeros_like(y)
+    for seg in _segments(t_s):
+        n = seg.stop - seg.start
+        if n >= 3:
+            out[seg] = np.gradient(y[seg], t_s[seg], axis=0, edge_order=2)
+        elif n == 2:
+            out[seg] = (y[seg][1] - y[seg][0]) / (t_s[seg][1] - t_s[seg][0])
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class DiagnosisData:
+    """Everything the attribution needs, as plain arrays (N samples, time-ordered).
+
+    Attributes
+    ----------
+    t_utc_s : ndarray, shape (N,)
+        Sample times, POSIX seconds of UTC [s].
+    b_raw_nt : ndarray, shape (N, 3)
+        Raw magnetometer output, sensor axes [nT].
+    b_ref_body_nt : ndarray, shape (N, 3)
+        Reference field (e.g. IGRF-14) at each sample, body frame [nT].
+    rot_itrs_to_body : ndarray, shape (N, 3, 3)
+        Rotation matrices with ``v_body = rot_itrs_to_body[n] @ v_itrs`` [-].
+    r_itrs_km : ndarray, shape (N, 3)
+        Positions, ITRS [km].
+    x_hk : ndarray, shape (N, k)
+        Housekeeping regressors (``temperature`` [degC], ``mtq_x..z`` [A m^2], ``hk_*``).
+    hk_names : tuple of str
+        Names of the ``x_hk`` columns.
+    sunlit : ndarray of bool, shape (N,), optional
+        True where the spacecraft is in sunlight.
+    sun_body : ndarray, shape (N, 3), optional
+        Unit vector towards the Sun, body frame [-].
+    rc_index_nt : ndarray, shape (N,), optional
+        Ring-current (RC) index interpolated at the sample times [nT].
+    b_crust_body_nt : ndarray, shape (N, 3), optional
+        A crustal field model at the samples, body frame [nT].
+    crust_model : str, optional
+        Name of that crustal model (e.g. ``"LCS-1"``).
+    reference_field : str
+        Name of the reference field with its generation (e.g. ``"IGRF-14"``).
+    """
+
+    t_utc_s: FloatArray
+    b_raw_nt: FloatArray
+    b_ref_body_nt: FloatArray
+    rot_itrs_to_body: FloatArray
+    r_itrs_km: FloatArray
+    x_hk: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
+    hk_names: tuple[str, ...] = ()
+    sunlit: BoolArray | None = None
+    sun_body: FloatArray | None = None
+    rc_index_nt: FloatArray | None = None
+    b_crust_body_nt: FloatArray | None = None
+    crust_model: str | None = None
+    reference_field: str = "IGRF-14"
+
+    def __post_init__(self) -> None:
+        n = self.t_utc_s.shape[0]
+        if self.b_raw_nt.shape != (n, 3) or self.b_ref_body_nt.shape != (n, 3):
+            raise ValueError("b_raw_nt and b_ref_body_nt must have shape (N, 3)")
+        if self.rot_itrs_to_body.shape != (n, 3, 3) or self.r_itrs_km.shape != (n, 3):
+            raise ValueError("rot_itrs_to_body must be (N, 3, 3) and r_itrs_km (N, 3)")
+        if self.x_hk.size and self.x_hk.shape != (n, len(self.hk_names)):
+            raise ValueError("x_hk must have shape (N, len(hk_names))")
+        if np.any(np.diff(self.t_utc_s) <= 0):
+            raise ValueError("t_utc_s must be strictly increasing")
+
+    @property
+    def n(self) -> int:
+        """Number of samples."""
+        return int(self.t_utc_s.shape[0])
+
+    def subset(self, index: npt.NDArray[np.intp] | BoolArray | slice) -> DiagnosisData:
+        """The same data restricted to some samples (order kept)."""
+
+        def pick(a: FloatArray | BoolArray | None) -> FloatArray | BoolArray | None:
+            return None if a is None else a[index]
+
+        return DiagnosisData(
+            t_utc_s=self.t_utc_s[index],
+            b_raw_nt=self.b_raw_nt[index],
+            b_ref_body_nt=self.b_ref_body_nt[index],
+            rot_itrs_to_body=self.rot_itrs_to_body[index],
+            r_itrs_km=self.r_itrs_km[index],
+            x_hk=self.x_hk[index] if self.x_hk.size else self.x_hk,
+            hk_names=self.hk_names,
+            sunlit=pick(self.sunlit),  # type: ignore[arg-type]
+            sun_body=pick(self.sun_body),  # type: ignore[arg-type]
+            rc_index_nt=pick(self.rc_index_nt),  # type: ignore[arg-type]
+            b_crust_body_nt=pick(self.b_crust_body_nt),  # type: ignore[arg-type]
+            crust_model=self.crust_model,
+            reference_field=self.reference_field,
+        )
+
+    def hk(self, name: str) -> FloatArray | None:
+        """The housekeeping column ``name`` or None."""
+        if name in self.hk_names and self.x_hk.size:
+            return self.x_hk[:, self.hk_names.index(name)]
+        return None
+
+    # Derived geometry, computed once.
+    @cached_property
+    def b_ref_itrs_nt(self) -> FloatArray:
+        """Reference field, ITRS [nT]."""
+        return np.einsum("nji,nj->ni", self.rot_itrs_to_body, self.b_ref_body_nt)
+
+    @cached_property
+    def db_ref_body_dt_nt_s(self) -> FloatArray:
+        """Time derivative of the reference field seen in the body frame [nT/s]."""
+        return _time_derivative(self.t_utc_s, self.b_ref_body_nt)
+
+    @cached_property
+    def speed_itrs_km_s(self) -> FloatArray:
+        """Ground-relative speed |d r_itrs / dt| [km/s]."""
+        v = _time_derivative(self.t_utc_s, self.r_itrs_km)
+        return np.maximum(np.linalg.norm(v, axis=1), 1e-6)
+
+    @cached_property
+    def db_ref_body_ds_nt_km(self) -> FloatArray:
+        """Along-track gradient of the reference field, rotated into the body frame [nT/km].
+
+        The field is differentiated along the track in the Earth-fixed frame (where it is static)
+        and rotated with the measured attitude, so attitude motion does not enter: this is what an
+        along-track position error produces, unlike a time-tag error.
+        """
+        db_itrs = _time_derivative(self.t_utc_s, self.b_ref_itrs_nt) / self.speed_itrs_km_s[:, None]
+        return np.einsum("nij,nj->ni", self.rot_itrs_to_body, db_itrs)
+
+    @cached_property
+    def dipole_axis_body(self) -> FloatArray:
+        """The dipole axis (SM z) in the body frame, per sample [-]."""
+        return np.einsum("nij,j->ni", self.rot_itrs_to_body, dipole_axis_itrs())
+
+    @cached_property
+    def mlat_deg(self) -> FloatArray:
+        """Centred-dipole magnetic latitude [deg]."""
+        return magnetic_latitude_deg(self.r_itrs_km)
+
+    @cached_property
+    def b_hat_body(self) -> FloatArray:
+        """Unit vector along the reference field, body frame [-]."""
+        b = self.b_ref_body_nt
+        return b / np.linalg.norm(b, axis=1, keepdims=True)
+
+    @cached_property
+    def transverse_body(self) -> FloatArray:
+        """Two unit vectors perpendicular to B, body frame, shape (N, 2, 3).
+
+        The first is magnetic east (dipole axis x position, projected perpendicular to B), the
+        second completes the right-handed set with B.
+        """
+        r_hat = self.r_itrs_km / np.linalg.norm(self.r_itrs_km, axis=1, keepdims=True)
+        east_itrs = np.cross(dipole_axis_itrs(), r_hat)
+        east_body = np.einsum("nij,nj->ni", self.rot_itrs_to_body, east_itrs)
+        b = self.b_hat_body
+        e1 = east_body - np.sum(east_body * b, axis=1, keepdims=True) * b
+        e1 /= np.maximum(np.linalg.norm(e1, axis=1, keepdims=True), 1e-12)
+        e2 = np.cross(b, e1)
+        return np.stack([e1, e2], axis=1)
+
+    @cached_property
+    def orbit_phase_rad(self) -> FloatArray:
+        """Orbit phase, like the argument of latitude, from the ITRS track [rad].
+
+        The phase is unwrapped along the track and measured from the northward crossing of the
+        equator, which is all the attitude-error harmonics need.
+        """
+        lat = np.arcsin(self.r_itrs_km[:, 2] / np.linalg.norm(self.r_itrs_km, axis=1))
+        vz = _time_derivative(self.t_utc_s, self.r_itrs_km)[:, 2]
+        # lat = asin(sin i sin u): recover u in [0, 2 pi) from lat and the sign of the z velocity.
+        s = np.clip(np.sin(lat) / max(np.max(np.abs(np.sin(lat))), 1e-9), -1.0, 1.0)
+        u = np.arcsin(s)
+        return np.where(vz >= 0.0, np.mod(u, 2 * np.pi), np.pi - u)
+
+
+@dataclass(frozen=True)
+class DesignBlock:
+    """An effect's regressors and parameter names.
+
+    Attributes
+    ----------
+    g : ndarray, shape (N, 3, p)
+        Regressors in the sensor/body frame; parameter ``k`` adds ``c[k] * g[:, :, k]`` [nT].
+    names : list of str
+        Parameter names with their units, e.g. ``"dt_s"``.
+    variant : str
+        Which form of the model was used (e.g. ``"trend"`` or ``"step"`` for drift).
+    alternatives : tuple of DesignBlock
+        Other forms of the same effect; the attribution keeps the one that fits the *training*
+        blocks best (never the held-out ones).
+    """
+
+    g: FloatArray
+    names: list[str]
+    variant: str = ""
+    alternatives: tuple[DesignBlock, ...] = ()
+
+
+DesignFn = Callable[[DiagnosisData, BoolArray], DesignBlock | None]
+
+
+@dataclass(frozen=True)
+class Effect:
+    """A candidate unmodelled effect.
+
+    Attributes
+    ----------
+    name : str
+        CONTRACT section-5 effect name.
+    physics : str
+        One line: what the model is.
+    witness : str
+        One line: what in the data reveals it (and which inputs it needs).
+    design : callable
+        ``design(data, train_mask) -> DesignBlock | None``; None when the witness is missing.
+        ``train_mask`` marks the samples a data-driven choice (e.g. a step time) may look at.
+    absorbed_by_calibration : bool
+        True when the 12 parameters can absorb it in some attitude regimes (needs split fits).
+    """
+
+    name: str
+    physics: str
+    witness: str
+    design: DesignFn
+    absorbed_by_calibration: bool = False
+
+
+def _tau_days(data: DiagnosisData, train: BoolArray) -> FloatArray:
+    t0 = float(np.mean(data.t_utc_s[train]))
+    return np.asarray((data.t_utc_s - t0) / SECONDS_PER_DAY)
+
+
+def _per_axis(columns: Sequence[FloatArray]) -> FloatArray:
+    """Regressors that act on one axis each: for every column x and axis i, x e_i."""
+    n = columns[0].shape[0]
+    g = np.zeros((n, 3, 3 * len(columns)))
+    for k, x in enumerate(columns):
+        for i in range(3):
+            g[:, i, 3 * k + i] = x
+    return g
+
+
+def _varies(x: FloatArray | None, *, tol: float = 1e-9) -> bool:
+    return x is not None and bool(np.all(np.isfinite(x))) and float(np.std(x)) > tol
+
+
+def _design_temperature(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
+    temp = data.hk("temperature")
+    if temp is None or not _varies(temp):
+        return None
+    dtemp = temp - float(np.mean(temp[train]))
+    scaled = data.b_ref_body_nt / FIELD_SCALE_NT
+    g = np.concatenate(
+        [_per_axis([dtemp]), np.stack([np.diag(v) for v in (dtemp[:, None] * scaled)])], axis=2
+    )
+    names = [f"offset_{a}_nt_per_degc" for a in "xyz"] + [
+        f"scale_{a}_per_degc_x{FIELD_SCALE_NT:.0e}" for a in "xyz"
+    ]
+    return DesignBlock(g, names)
+
+
+def _design_magnetorquer(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
+    cols = [data.hk(f"mtq_{a}") for a in "xyz"]
+    if all(c is None or not _varies(c) for c in cols):
+        return None
+    m = np.stack([c if c is not None else np.zeros(data.n) for c in cols], axis=1)
+    g = np.zeros((data.n, 3, 9))
+    names = []
+    for i in range(3):
+        for j in range(3):
+            g[:, i, 3 * i + j] = m[:, j]
+            names.append(f"coupling_{'xyz'[i]}{'xyz'[j]}_nt_per_am2")
+    return DesignBlock(g, names)
+
+
+def _design_time_offset(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
+    return DesignBlock(data.db_ref_body_dt_nt_s[:, :, None], ["dt_s"])
+
+
+def _design_external(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
+    axis = data.dipole_axis_body
+    cols = [axis]
+    names = ["uniform_along_dipole_nt"]
+    rc = data.rc_index_nt
+    if rc is not None and _varies(rc[train], tol=1.0):
+        cols.append(axis * (rc - float(np.mean(rc[train])))[:, None])
+        names.append("rc_coefficient")
+    else:
+        cols.append(axis * _tau_days(data, train)[:, None])
+        names.append("uniform_trend_nt_per_day")
+    variant = "rc_index" if names[1] == "rc_coefficient" else "per_window"
+    return DesignBlock(np.stack(cols, axis=2), names, variant=variant)
+
+
+def _design_crustal(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
+    if data.b_crust_body_nt is None:
+        return None
+    return DesignBlock(
+        data.b_crust_body_nt[:, :, None], ["crust_scale"], variant=data.crust_model or "model"
+    )
+
+
+def _design_sun(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
+    if data.sunlit is None or data.sun_body is None:
+        return None
+    lit = data.sunlit.astype(float)
+    if not (0.02 < float(np.mean(lit[train])) < 0.98):
+        return None
+    cols = [lit] + [lit * data.sun_body[:, k] for k in range(3)]
+    names = [f"sunlit_offset_{a}_nt" for a in "xyz"]
+    for k in "xyz":
+        names += [f"sun_{k}_to_{a}_nt" for a in "xyz"]
+    return DesignBlock(_per_axis(cols), names)
+
+
+def _design_nonlinearity(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
+    b = data.b_ref_body_nt / FIELD_SCALE_NT
+    g = np.concatenate(
+        [
+            np.stack([np.diag(v) for v in b**2]),
+            np.stack([np.diag(v) for v in b**3]),
+        ],
+        axis=2,
+    )
+    names = [f"quadratic_{a}_nt" for a in "xyz"] + [f"cubic_{a}_nt" for a in "xyz"]
+    return DesignBlock(g, names)
+
+
+def _design_orbit(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
+    grad = data.db_ref_body_ds_nt_km
+    tau = _tau_days(data, train)
+    g = np.stack([grad, grad * tau[:, None]], axis=2)
+    return DesignBlock(g, ["along_track_km", "along_track_rate_km_per_day"])
+
+
+def _design_drift(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
+    tau = _tau_days(data, train)
+    scaled = data.b_ref_body_nt / FIELD_SCALE_NT
+    names_b = [f"bias_{a}" for a in "xyz"]
+    names_s = [f"scale_{a}_x{FIELD_SCALE_NT:.0e}" for a in "xyz"]
+
+    def block(x: FloatArray) -> FloatArray:
+        return np.concatenate(
+            [_per_axis([x]), np.stack([np.diag(v) for v in (x[:, None] * scaled)])], axis=2
+        )
+
+    trend = block(tau)
+    best = DesignBlock(trend, [n + "_nt_per_day" for n in names_b + names_s], variant="trend")
+    # A step at one of ~20 candidate times inside the training span, chosen on training only by the
+    # residual of the joint fit (done by the caller through ``choose_variant``).
+    t_train = data.t_utc_s[train]
+    span = float(t_train[-1] - t_train[0]) if t_train.size > 1 else 0.0
+    if span <= 0.0:
+        return best
+    steps = []
+    for frac in np.linspace(0.1, 0.9, 17):
+        ts = float(t_train[0] + frac * span)
+        h = (data.t_utc_s >= ts).astype(float)
+        steps.append(
+            DesignBlock(
+                block(h), [n + "_step_nt" for n in names_b + names_s], variant=f"step@{ts:.0f}"
+            )
+        )
+    return DesignBlock(best.g, best.names, best.variant, alternatives=tuple(steps))
+
+
+#: Magnetic-latitude centres [deg] and width [deg] of the field-aligned-current basis bumps.
+FAC_CENTRES_DEG: tuple[float, ...] = (60.0, 65.0, 70.0, 75.0, 80.0)
+FAC_WIDTH_DEG = 3.5
+FAC_MIN_MLAT_DEG = 58.0
+
+
+def _design_fac(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
+    mlat = data.mlat_deg
+    if not np.any(np.abs(mlat[train]) > FAC_MIN_MLAT_DEG):
+        return None
+    cols = []
+    names = []
+    perp = data.transverse_body
+    for hemi, sign in (("n", 1.0), ("s", -1.0)):
+        for c in FAC_CENTRES_DEG:
+            bump = np.exp(-0.5 * ((sign * mlat - c) / FAC_WIDTH_DEG) ** 2)
+            bump[sign * mlat < FAC_MIN_MLAT_DEG - 3 * FAC_WIDTH_DEG] = 0.0
+            if float(np.max(bump[train], initial=0.0)) < 0.05:
+                continue
+            for k, comp in enumerate(("east", "perp")):
+                cols.append(perp[:, k, :] * bump[:, None])
+                names.append(f"{comp}_{hemi}{c:.0f}_nt")
+    if not cols:
+        return None
+    return DesignBlock(np.stack(cols, axis=2), names)
+
+
+def _design_attitude(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
+    # A slowly varying small rotation dtheta(t) of the attitude: db = dtheta x b. The constant part
+    # is a misalignment the 12 parameters absorb, so only its variation is modelled: orbit-phase
+    # harmonics 1 and 2 plus a linear trend, for each of the three rotation axes.
+    phase = data.orbit_phase_rad
+    tau = _tau_days(data, train)
+    funcs = {
+        "cos1": np.cos(phase),
+        "sin1": np.sin(phase),
+        "cos2": np.cos(2 * phase),
+        "sin2": np.sin(2 * phase),
+        "trend_per_day": tau,
+    }
+    b = data.b_ref_body_nt
+    cols = []
+    names = []
+    for k, axis in enumerate("xyz"):
+        e = np.zeros(3)
+        e[k] = 1.0
+        cross = np.cross(e, b)  # d(theta_k) e_k x b  [nT per rad]
+        for fname, f in funcs.items():
+            cols.append(cross * f[:, None] * 1e-3)
+            names.append(f"dtheta_{axis}_{fname}_mrad")
+    return DesignBlock(np.stack(cols, axis=2), names)
+
+
+CATALOGUE: tuple[Effect, ...] = (
+    Effect(
+        "temperature",
+        "offset and scale factor linear in the sensor temperature",
+        "a temperature channel; residual correlates with it (often with sunlight)",
+        _design_temperature,
+        absorbed_by_calibration=True,
+    ),
+    Effect(
+        "magnetorquer",
+        "3x3 coupling of the magnetorquer dipole commands into the sensor",
+        "mtq_x, mtq_y, mtq_z commands; residual steps when they switch",
+        _design_magnetorquer,
+    ),
+    Effect(
+        "time_offset",
+        "a constant time-tag error dt: db = dt * d(B_body)/dt",
+        "residual follows the body-frame time derivative of B (attitude motion included)",
+        _design_time_offset,
+        absorbed_by_calibration=True,
+    ),
+    Effect(
+        "external_field",
+        "uniform magnetospheric field along the dipole (SM z) axis: ring current, "
+        "constant plus RC-index-driven (or a per-window trend when no index covers the data)",
+        "residual along the dipole axis, same sign at all latitudes; follows the RC/Dst index",
+        _design_external,
+    ),
+    Effect(
+        "crustal_field",
+        "static lithospheric field fixed to the Earth (a crustal model, scaled)",
+        "residual repeats with position on the ground track; needs a crustal model",
+        _design_crustal,
+    ),
+    Effect(
+        "sun_driven",
+        "field organised by the Sun direction in the body frame, sunlit only (Swarm's dB_Sun)",
+        "sunlit vs eclipse split fits disagree; needs the Sun direction and eclipse flag",
+        _design_sun,
+        absorbed_by_calibration=True,
+    ),
+    Effect(
+        "nonlinearity",
+        "quadratic and cubic terms of the sensor transfer function, per axis",
+        "residual grows with |B| on an axis faster than linearly",
+        _design_nonlinearity,
+    ),
+    Effect(
+        "orbit_error",
+        "along-track position error (constant plus growth with time): "
+        "db = ds * dB/ds along the Earth-fixed track",
+        "residual follows the along-track gradient of the field, not the attitude motion",
+        _design_orbit,
+        absorbed_by_calibration=True,
+    ),
+    Effect(
+        "parameter_drift",
+        "trend or step in the biases and scale factors",
+        "split fits of consecutive time blocks disagree; the held-out error grows with time",
+        _design_drift,
+        absorbed_by_calibration=True,
+    ),
+    Effect(
+        "field_aligned_currents",
+        "transverse field at high magnetic latitude (bumps in |magnetic latitude| > 58 deg, "
+        "magnetic east and the second direction perpendicular to B)",
+        "residual concentrated at |magnetic latitude| > 60 deg, perpendicular to B",
+        _design_fac,
+    ),
+    Effect(
+        "attitude_error",
+        "a slowly varying attitude error dtheta(t): db = dtheta x B (orbit harmonics + trend)",
+        "vector residual perpendicular to B while the scalar residual stays clean",
+        _design_attitude,
+        absorbed_by_calibration=True,
+    ),
+)
+
+assert tuple(e.name for e in CATALOGUE) == EFFECT_NAMES
+
+
+def get_effect(name: str) -> Effect:
+    """The catalogue entry called ``name``; raises KeyError for unknown names."""
+    for effect in CATALOGUE:
+        if effect.name == name:
+            return effect
+    raise KeyError(f"unknown effect {name!r}; known: {', '.join(EFFECT_NAMES)}")
