@@ -21,7 +21,7 @@ from service.ingest import (
     telemetry_to_rows,
 )
 from service.schemas import ErrorPublic, IngestResult, RowRejection
-from service.storage import insert_samples, write_tx
+from service.storage import insert_samples, read_tx, write_tx
 
 __all__ = ["router"]
 
@@ -98,6 +98,8 @@ async def ingest_telemetry(
     started = time.perf_counter()
 
     def work() -> IngestResult:
+        with read_tx(engine) as conn:
+            get_spacecraft(conn, spacecraft_id)  # 404 before any parsing
         try:
             raw = decompress(
                 body, request.headers.get("content-encoding", ""), limit=settings.max_body_bytes

@@ -1,0 +1,90 @@
+"""Service test helpers: a real uvicorn server on 127.0.0.1 (random port) per test or module."""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import httpx
+import uvicorn
+
+from service.app import create_app
+from service.settings import Settings
+
+ADMIN_KEY = "test-admin-" + uuid.uuid4().hex
+PG_URL = os.environ.get("ORBITCAL_TEST_PG", "postgresql://postgres@127.0.0.1:5432/test")
+
+
+class LiveServer:
+    def __init__(self, app: Any) -> None:
+        self.app = app
+        config = uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning", lifespan="on")
+        self.server = uvicorn.Server(config)
+        self.thread = threading.Thread(target=self.server.run, daemon=True)
+
+    def start(self) -> LiveServer:
+        self.thread.start()
+        deadline = time.monotonic() + 30
+        while not self.server.started:
+            if not self.thread.is_alive() or time.monotonic() > deadline:
+                raise RuntimeError("uvicorn did not start")
+            time.sleep(0.02)
+        sock = self.server.servers[0].sockets[0]
+        self.port = sock.getsockname()[1]
+        self.url = f"http://127.0.0.1:{self.port}"
+        return self
+
+    def stop(self) -> None:
+        self.server.should_exit = True
+        self.thread.join(timeout=30)
+
+    def client(self, key: str | None = ADMIN_KEY) -> httpx.Client:
+        headers = {"X-API-Key": key} if key else {}
+        return httpx.Client(base_url=self.url, headers=headers, timeout=60)
+
+
+@contextmanager
+def live_server(settings: Settings, **kwargs: Any) -> Iterator[LiveServer]:
+    server = LiveServer(create_app(settings, **kwargs)).start()
+    try:
+        yield server
+    finally:
+        server.stop()
+
+
+def sqlite_settings(tmp_path: Path, **overrides: Any) -> Settings:
+    values: dict[str, Any] = {
+        "database_url": f"sqlite:///{tmp_path / 'orbitcal.sqlite'}",
+        "admin_key": ADMIN_KEY,
+        "scheduler": False,
+        "sqlite_synchronous": "NORMAL",
+        "log_level": "WARNING",
+    }
+    values.update(overrides)
+    return Settings(**values)
+
+
+@contextmanager
+def pg_schema_url() -> Iterator[str]:
+    """A fresh PostgreSQL schema for this test run; dropped afterwards."""
+    import sqlalchemy as sa
+
+    from service.storage import make_engine
+
+    schema = "t_" + uuid.uuid4().hex[:12]
+    admin = make_engine(PG_URL)
+    with admin.begin() as conn:
+        conn.exec_driver_sql(f"CREATE SCHEMA {schema}")
+    sep = "&" if "?" in PG_URL else "?"
+    try:
+        yield f"{PG_URL}{sep}options=-csearch_path%3D{schema}"
+    finally:
+        with admin.begin() as conn:
+            conn.execute(sa.text(f"DROP SCHEMA IF EXISTS {schema} CASCADE"))
+        admin.dispose()
