@@ -1,0 +1,67 @@
+"""``orbitcal apply CAL.json TELEMETRY --out OUT.csv``: the calibrated field (CONTRACT section 2).
+
+Writes ``time,b_x,b_y,b_z``: the calibration of the document applied to each valid row, body frame,
+nT. Methods with housekeeping inputs read the same columns (temperature, ``mtq_*``, ``hk_*``) from
+the table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+__all__ = ["register", "run"]
+
+
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add the ``apply`` sub-command."""
+    p = sub.add_parser(
+        "apply",
+        help="apply a calibration document to telemetry (CSV time,b_x,b_y,b_z, nT)",
+        description="Apply a calibration document (CONTRACT section 4) to a telemetry table.",
+    )
+    p.add_argument("calibration", metavar="CAL.json", help="calibration document")
+    p.add_argument(
+        "telemetry", metavar="TELEMETRY", help="telemetry table (.csv/.parquet/.ndjson/.json)"
+    )
+    p.add_argument("--out", required=True, metavar="OUT.csv", help="output CSV")
+    p.add_argument(
+        "--time-scale",
+        default="UTC",
+        choices=("UTC", "TAI", "GPS"),
+        help="time scale of the table's times (default UTC)",
+    )
+    p.add_argument(
+        "--attitude-frame",
+        default="GCRS",
+        choices=("GCRS", "ITRS"),
+        help="accepted for symmetry with the other commands; apply needs no attitude",
+    )
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Execute ``orbitcal apply``."""
+    from orbitcal.calibrate.document import read_document
+    from orbitcal.cli import CliError
+    from orbitcal.pipeline import apply_document
+    from orbitcal.telemetry import read_telemetry, write_field_csv
+
+    try:
+        doc = read_document(args.calibration)
+    except OSError as exc:
+        raise CliError(f"cannot read {args.calibration}: {exc.strerror}") from None
+    result = read_telemetry(args.telemetry, time_scale=args.time_scale)
+    tel = result.telemetry
+    if result.rejected:
+        first = result.rejected[0]
+        print(
+            f"orbitcal apply: {len(result.rejected)} rows rejected (first: row {first.row}: "
+            f"{first.reason}); the {len(tel)} valid rows are used",
+            file=sys.stderr,
+        )
+    if len(tel) == 0:
+        raise CliError(f"{args.telemetry}: no valid rows")
+    b_cal = apply_document(doc, tel)
+    write_field_csv(args.out, tel.t_utc_s, b_cal)
+    return 0
