@@ -10,7 +10,7 @@ the contract's quaternion convention (``orbitcal.attitude.frame_to_body``:
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -18,6 +18,7 @@ import numpy.typing as npt
 from orbitcal.attitude import frame_to_body
 from orbitcal.field import DEFAULT_FIELD, FieldModel, get_field
 from orbitcal.frames import itrs_to_gcrs, itrs_to_spherical, nec_to_itrs
+from orbitcal.orbit import Propagator, require_valid
 
 if TYPE_CHECKING:
     from orbitcal.telemetry import Telemetry
@@ -190,30 +191,16 @@ class Truth:
     position_source: str
 
 
-def _positions_from_orbit(orbit: Any, t: FloatArray) -> FloatArray:
+def _positions_from_orbit(orbit: Propagator, t: FloatArray) -> FloatArray:
     """Propagate ``orbit``; raise ``PropagationError`` naming the rows SGP4 flagged."""
-    from orbitcal.orbit import PropagationError
-
-    eph = orbit.propagate(t)
-    code = np.asarray(eph.error_code)
-    r = np.asarray(eph.r_itrs_km, dtype=np.float64)
-    bad = (code != 0) | ~np.all(np.isfinite(r), axis=1)
-    if np.any(bad):
-        rows = np.flatnonzero(bad)
-        shown = ", ".join(str(int(i)) for i in rows[:10]) + (" ..." if rows.size > 10 else "")
-        codes = sorted({int(c) for c in code[bad]})
-        raise PropagationError(
-            f"SGP4 could not propagate {rows.size} of {t.size} samples (rows {shown}; error codes "
-            f"{codes}): the TLE is stale or decayed for these times — supply a TLE with an epoch "
-            "near the data or positions r_x, r_y, r_z"
-        )
-    return r
+    eph = require_valid(orbit.propagate(t))
+    return np.asarray(eph.r_itrs_km, dtype=np.float64)
 
 
 def truth_for_telemetry(
     telemetry: Telemetry,
     *,
-    orbit: Any = None,
+    orbit: Propagator | None = None,
     attitude_frame: str = "GCRS",
     field: str | FieldModel = DEFAULT_FIELD,
 ) -> Truth:
@@ -226,7 +213,7 @@ def truth_for_telemetry(
     ----------
     telemetry : Telemetry
         Validated table (times in UTC).
-    orbit : Orbit, optional, keyword-only
+    orbit : Propagator (e.g. orbitcal.orbit.Orbit), optional, keyword-only
         Needed when the table has no positions.
     attitude_frame : {"GCRS", "ITRS"}, keyword-only
         Frame of the table's quaternions.
