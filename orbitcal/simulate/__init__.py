@@ -1,0 +1,74 @@
+"""Synthetic worlds with known ground truth: attitude profiles, injectable effects, Wang 2020.
+
+Three layers (STYLE: pure functions → objects holding parameters → a pipeline):
+:mod:`~orbitcal.simulate.wang2020` (the paper's scenarios as pure functions),
+:mod:`~orbitcal.simulate.attitude_profiles` and :mod:`~orbitcal.simulate.effects` (parameterised
+objects), :func:`simulate_world` (the pipeline) returning a :class:`World` that writes itself as a
+directory (telemetry, TLE, ``truth.json``).
+"""
+
+from __future__ import annotations
+
+from orbitcal.simulate.attitude_profiles import (
+    ATTITUDE_PROFILES,
+    AttitudeProfile,
+    Inertial,
+    NadirLVLH,
+    Tumbling,
+    attitude_profile,
+)
+from orbitcal.simulate.effects import (
+    EFFECT_NAMES,
+    EFFECTS,
+    Effect,
+    Injection,
+    make_effect,
+    parse_effect_spec,
+)
+from orbitcal.simulate.wang2020 import (
+    Wang2020Scenario,
+    wang2020_ground,
+    wang2020_orbit,
+    wang2020_time_s,
+    wang2020_truth_nt,
+)
+from orbitcal.simulate.world import (
+    Housekeeping,
+    Kinematics,
+    TleSet,
+    World,
+    WorldState,
+    kinematics,
+    parse_tles,
+    select_tle,
+    simulate_world,
+)
+
+__all__ = [
+    "ATTITUDE_PROFILES",
+    "EFFECTS",
+    "EFFECT_NAMES",
+    "AttitudeProfile",
+    "Effect",
+    "Housekeeping",
+    "Inertial",
+    "Injection",
+    "Kinematics",
+    "NadirLVLH",
+    "TleSet",
+    "Tumbling",
+    "Wang2020Scenario",
+    "World",
+    "WorldState",
+    "attitude_profile",
+    "kinematics",
+    "make_effect",
+    "parse_effect_spec",
+    "parse_tles",
+    "select_tle",
+    "simulate_world",
+    "wang2020_ground",
+    "wang2020_orbit",
+    "wang2020_time_s",
+    "wang2020_truth_nt",
+]

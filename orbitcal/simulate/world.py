@@ -1,0 +1,622 @@
+"""Synthetic worlds: a spacecraft on a real TLE, an attitude profile, a sensor and injected effects.
+
+A world is built in this order (all seeded from one ``np.random.Generator``):
+
+1. sample times ``t_utc_s`` (start + k · cadence);
+2. orbit (SGP4 on the TLE) → ``r_itrs_km``, ``r_gcrs_km``, ``v_gcrs_km_s``; attitude profile →
+   ``q_wxyz`` (GCRS);
+3. reference field in body axes, ``b_ref_body_nt = orbitcal.truth.truth_body_nt(...)``
+   (IGRF-14 by default) — what a calibration is compared with;
+4. Sun (analytic) and the conical Earth shadow → illumination 0…1;
+5. housekeeping that every spacecraft has, whether or not an effect couples to it: a sensor
+   temperature following the orbital thermal cycle (±10 °C sunlit/eclipse, first-order lag) and
+   magnetorquer dipole commands from a gated B-dot-like law;
+6. each effect's field-equivalent disturbance ``dB_body_nt`` (see :mod:`orbitcal.simulate.effects`);
+7. the sensor, Wang 2020 eq. 1: ``b_raw = A (b_ref + Σ dB) + B_0 + noise``.
+
+The telemetry carries the sample times, ``b_raw``, the attitude quaternions and the housekeeping
+(positions only when asked: by default they come from the TLE, CONTRACT section 1). The ground
+truth — sensor parameters, effects with their parameters and RMS, the injected field per sample —
+is kept in :class:`World` and written next to the telemetry and the TLE by :meth:`World.write`.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from orbitcal import frames
+from orbitcal.attitude import frame_to_body
+from orbitcal.sensor import SensorModel
+from orbitcal.simulate.attitude_profiles import AttitudeProfile, NadirLVLH
+from orbitcal.sun import illumination_conical, sun_position_gcrs_km
+from orbitcal.telemetry import Telemetry, format_from_path, write_telemetry
+from orbitcal.timescales import utc_s_to_iso
+from orbitcal.truth import reference_field_itrs_nt
+
+if TYPE_CHECKING:  # pragma: no cover
+    from orbitcal.simulate.effects import Effect
+
+__all__ = [
+    "Housekeeping",
+    "Kinematics",
+    "TleSet",
+    "World",
+    "WorldState",
+    "kinematics",
+    "orbital_thermal_cycle_c",
+    "parse_tles",
+    "select_tle",
+    "simulate_world",
+]
+
+FloatArray = npt.NDArray[np.float64]
+_UNIX_EPOCH_JD = 2_440_587.5
+
+
+# --- TLE handling --------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class TleSet:
+    """One two-line element set with its optional name line."""
+
+    name: str
+    line1: str
+    line2: str
+
+    @property
+    def norad_id(self) -> int:
+        return int(self.line1[2:7])
+
+    @property
+    def epoch_utc_s(self) -> float:
+        """Epoch, POSIX seconds of UTC [s]."""
+        from sgp4.api import Satrec
+
+        sat = Satrec.twoline2rv(self.line1, self.line2)
+        return float((sat.jdsatepoch - _UNIX_EPOCH_JD + sat.jdsatepochF) * 86400.0)
+
+    @property
+    def text(self) -> str:
+        """Three-line text (name line first when there is a name)."""
+        lines = [self.name] if self.name else []
+        return "\n".join([*lines, self.line1, self.line2]) + "\n"
+
+
+def parse_tles(text: str) -> list[TleSet]:
+    """Every element set in a TLE file (2-line or 3-line entries, in file order)."""
+    lines = [ln.rstrip() for ln in text.splitlines() if ln.strip()]
+    out: list[TleSet] = []
+    i = 0
+    name = ""
+    while i < len(lines):
+        ln = lines[i]
+        if ln.startswith("1 ") and i + 1 < len(lines) and lines[i + 1].startswith("2 "):
+            out.append(TleSet(name.strip(), ln, lines[i + 1]))
+            name = ""
+            i += 2
+        else:
+            name = ln[2:] if ln.startswith("0 ") else ln
+            i += 1
+    if not out:
+        raise ValueError("no two-line element set found (lines starting '1 ' and '2 ')")
+    return out
+
+
+def select_tle(text: str, *, norad_id: int | None = None, at_utc_s: float | None = None) -> TleSet:
+    """The element set for one spacecraft nearest a time (latest epoch not after it, if any).
+
+    Parameters
+    ----------
+    text : str
+        TLE file contents, possibly many sets of many spacecraft.
+    norad_id : int or None
+        Catalogue number; required when the file holds more than one spacecraft.
+    at_utc_s : float or None
+        Time the world starts, POSIX seconds of UTC [s]; None picks the latest epoch.
+    """
+    sets = parse_tles(text)
+    ids = sorted({s.norad_id for s in sets})
+    if norad_id is None:
+        if len(ids) > 1:
+            raise ValueError(
+                f"the TLE file holds {len(ids)} spacecraft ({', '.join(map(str, ids))}): "
+                "name one with --norad"
+            )
+        norad_id = ids[0]
+    mine = [s for s in sets if s.norad_id == norad_id]
+    if not mine:
+        raise ValueError(f"no element set for NORAD {norad_id} (the file has {ids})")
+    epochs = np.array([s.epoch_utc_s for s in mine])
+    if at_utc_s is None:
+        return mine[int(np.argmax(epochs))]
+    before = np.flatnonzero(epochs <= at_utc_s)
+    if before.size:
+        return mine[int(before[np.argmax(epochs[before])])]
+    return mine[int(np.argmin(np.abs(epochs - at_utc_s)))]
+
+
+# --- kinematics ----------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Kinematics:
+    """Position, velocity and attitude at a set of times."""
+
+    t_utc_s: FloatArray
+    r_itrs_km: FloatArray
+    r_gcrs_km: FloatArray
+    v_gcrs_km_s: FloatArray
+    q_wxyz: FloatArray
+
+
+def _propagate_teme(tle: TleSet, t_utc_s: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """SGP4 positions [km] and velocities [km/s] in TEME; raises naming failing rows."""
+    try:
+        from orbitcal.orbit import Orbit
+    except ImportError:  # pragma: no cover - orbitcal.orbit not yet available
+        Orbit = None  # type: ignore[assignment,misc]
+    if Orbit is not None:
+        eph = Orbit.from_tle(tle.text).propagate(t_utc_s)
+        r, v, code = eph.r_teme_km, eph.v_teme_km_s, np.asarray(eph.error_code)
+    else:  # pragma: no cover
+        from sgp4.api import Satrec
+
+        sat = Satrec.twoline2rv(tle.line1, tle.line2)
+        days = t_utc_s / 86400.0
+        jd = np.floor(days) + _UNIX_EPOCH_JD
+        fr = days - np.floor(days)
+        code, r, v = sat.sgp4_array(jd, fr)
+    bad = np.flatnonzero(np.asarray(code) != 0)
+    if bad.size:
+        raise ValueError(
+            f"SGP4 failed for NORAD {tle.norad_id} at {bad.size} samples (first: sample "
+            f"{int(bad[0])}, error code {int(np.asarray(code)[bad[0]])}): the TLE is stale or "
+            "decayed for these dates"
+        )
+    return np.asarray(r, dtype=np.float64), np.asarray(v, dtype=np.float64)
+
+
+def kinematics(tle: TleSet, attitude: AttitudeProfile, t_utc_s: npt.ArrayLike) -> Kinematics:
+    """Orbit and attitude at the given times (SGP4 → TEME → ITRS and GCRS)."""
+    t = np.asarray(t_utc_s, dtype=np.float64)
+    r_teme, v_teme = _propagate_teme(tle, t)
+    m_teme_to_itrs = frames.teme_to_itrs_matrix(t)
+    m_gcrs_to_itrs = frames.gcrs_to_itrs_matrix(t)
+    # TEME → GCRS is the (slow) precession-nutation-equinox rotation; Earth rotation cancels.
+    m_teme_to_gcrs = np.einsum("nji,njk->nik", m_gcrs_to_itrs, m_teme_to_itrs)
+    r_itrs = np.einsum("nij,nj->ni", m_teme_to_itrs, r_teme)
+    r_gcrs = np.einsum("nij,nj->ni", m_teme_to_gcrs, r_teme)
+    v_gcrs = np.einsum("nij,nj->ni", m_teme_to_gcrs, v_teme)
+    q = attitude.q_wxyz(t, r_gcrs, v_gcrs)
+    return Kinematics(t, r_itrs, r_gcrs, v_gcrs, q)
+
+
+# --- housekeeping --------------------------------------------------------------------------------
+
+
+def _first_order_lag(x: FloatArray, t_s: FloatArray, tau_s: float, y0: float) -> FloatArray:
+    """Exact discretisation of ``τ dy/dt = x − y`` for piecewise-constant input."""
+    y = np.empty_like(x)
+    alpha = 1.0 - np.exp(-np.diff(t_s, prepend=t_s[0]) / tau_s)
+    acc = y0
+    for k in range(x.size):
+        acc += alpha[k] * (x[k] - acc)
+        y[k] = acc
+    return y
+
+
+def orbital_thermal_cycle_c(
+    t_utc_s: FloatArray,
+    illumination: FloatArray,
+    r_gcrs_km: FloatArray,
+    sun_gcrs_km: FloatArray,
+    *,
+    mean_c: float = 20.0,
+    amplitude_c: float = 11.0,
+    tau_s: float = 900.0,
+    albedo_c: float = 2.0,
+) -> FloatArray:
+    """Sensor temperature along the orbit [°C]: sunlit warm, eclipse cold, with thermal lag.
+
+    ``T = mean + amplitude · (2·lag(illumination) − 1) + albedo · max(0, r̂·ŝ)``, the lag a
+    first-order filter of time constant ``tau_s`` started at the mean illumination; with ~35 %
+    eclipse the swing is about ±10 °C. The albedo term keeps a cycle in eclipse-free orbits.
+    """
+    y0 = float(np.mean(illumination)) if illumination.size else 1.0
+    lagged = _first_order_lag(illumination, t_utc_s, tau_s, y0)
+    r_hat = r_gcrs_km / np.linalg.norm(r_gcrs_km, axis=1, keepdims=True)
+    s_hat = sun_gcrs_km / np.linalg.norm(sun_gcrs_km, axis=1, keepdims=True)
+    subsolar = np.clip(np.sum(r_hat * s_hat, axis=1), 0.0, None)
+    return mean_c + amplitude_c * (2.0 * lagged - 1.0) + albedo_c * subsolar
+
+
+@dataclass(frozen=True)
+class Housekeeping:
+    """Parameters of the housekeeping every simulated spacecraft reports.
+
+    Attributes
+    ----------
+    temperature_mean_c, temperature_amplitude_c, temperature_tau_s : float
+        Orbital thermal cycle (see :func:`orbital_thermal_cycle_c`) [°C], [°C], [s].
+    temperature_noise_c : float
+        White noise of the temperature reading [°C].
+    mtq_max_am2 : float
+        Magnetorquer saturation dipole per axis [A·m²].
+    mtq_bdot_scale_nt_s : float
+        Field rate at which the B-dot command reaches 76 % of saturation (tanh law) [nT/s].
+    mtq_duty : float
+        Fraction of time the torquers are enabled (random dwell segments).
+    mtq_dwell_s : float
+        Mean length of an enabled/disabled segment [s].
+    """
+
+    temperature_mean_c: float = 20.0
+    temperature_amplitude_c: float = 11.0
+    temperature_tau_s: float = 900.0
+    temperature_noise_c: float = 0.05
+    mtq_max_am2: float = 2.0
+    mtq_bdot_scale_nt_s: float = 20.0
+    mtq_duty: float = 0.6
+    mtq_dwell_s: float = 120.0
+
+    def mtq_commands_am2(
+        self, t_utc_s: FloatArray, b_body_nt: FloatArray, *, rng: np.random.Generator
+    ) -> FloatArray:
+        """Gated B-dot-like dipole commands in body axes [A·m²], shape (N, 3).
+
+        ``m = −m_max · tanh(Ḃ / Ḃ_scale) · gate + desaturation``: the gate switches on and off in
+        random dwell segments (duty ``mtq_duty``) and a slow momentum-dumping dipole (three
+        sinusoids of random period 1–5 ks, ≤ 0.3 m_max) decorrelates the commands from Ḃ.
+        """
+        n = t_utc_s.size
+        if n == 0:
+            return np.zeros((0, 3))
+        b_dot = np.gradient(b_body_nt, t_utc_s, axis=0) if n > 1 else np.zeros_like(b_body_nt)
+        bdot_cmd = -self.mtq_max_am2 * np.tanh(b_dot / self.mtq_bdot_scale_nt_s)
+        span = float(t_utc_s[-1] - t_utc_s[0]) + 1.0
+        n_seg = int(span / self.mtq_dwell_s * 2) + 4
+        edges = t_utc_s[0] + np.cumsum(rng.exponential(self.mtq_dwell_s, n_seg))
+        states = rng.random(n_seg + 1) < self.mtq_duty
+        gate = states[np.searchsorted(edges, t_utc_s)].astype(np.float64)
+        periods = rng.uniform(1000.0, 5000.0, (3, 3))
+        phases = rng.uniform(0.0, 2 * np.pi, (3, 3))
+        dt = (t_utc_s - t_utc_s[0])[:, None, None]
+        desat = 0.1 * self.mtq_max_am2 * np.sin(2 * np.pi * dt / periods + phases).sum(axis=2)
+        return np.clip(bdot_cmd * gate[:, None] + desat, -self.mtq_max_am2, self.mtq_max_am2)
+
+
+# --- the world state seen by effects ------------------------------------------------------------
+
+
+class WorldState:
+    """Everything an effect may use to compute its disturbance (read-only by convention).
+
+    Arrays are per sample (N rows). ``b_ref_body_nt`` is the reference field in the body axes of the
+    reported attitude; :meth:`field_body_nt` evaluates it anywhere else (other times, positions or
+    attitudes) for effects such as time_offset, orbit_error and attitude_error.
+    """
+
+    def __init__(
+        self,
+        *,
+        tle: TleSet,
+        attitude: AttitudeProfile,
+        field: str,
+        kin: Kinematics,
+        housekeeping: Housekeeping,
+        hk_rng: np.random.Generator,
+    ) -> None:
+        self.tle = tle
+        self.attitude = attitude
+        self.field = field
+        self.kin = kin
+        self.t_utc_s = kin.t_utc_s
+        self.r_itrs_km = kin.r_itrs_km
+        self.r_gcrs_km = kin.r_gcrs_km
+        self.v_gcrs_km_s = kin.v_gcrs_km_s
+        self.q_wxyz = kin.q_wxyz
+        self.b_ref_itrs_nt = reference_field_itrs_nt(self.t_utc_s, self.r_itrs_km, field=field)
+        self.b_ref_body_nt = self.itrs_to_body(self.b_ref_itrs_nt)
+        self.sun_gcrs_km = sun_position_gcrs_km(self.t_utc_s)
+        self.illumination = illumination_conical(self.r_gcrs_km, self.sun_gcrs_km)
+        self.housekeeping = housekeeping
+        temp = orbital_thermal_cycle_c(
+            self.t_utc_s,
+            self.illumination,
+            self.r_gcrs_km,
+            self.sun_gcrs_km,
+            mean_c=housekeeping.temperature_mean_c,
+            amplitude_c=housekeeping.temperature_amplitude_c,
+            tau_s=housekeeping.temperature_tau_s,
+        )
+        self.temperature_c = temp + hk_rng.normal(0.0, housekeeping.temperature_noise_c, temp.size)
+        self.mtq_am2 = housekeeping.mtq_commands_am2(self.t_utc_s, self.b_ref_body_nt, rng=hk_rng)
+
+    def __len__(self) -> int:
+        return int(self.t_utc_s.size)
+
+    @cached_property
+    def sun_body_unit(self) -> FloatArray:
+        """Unit vector to the Sun in body axes, shape (N, 3)."""
+        s = self.sun_gcrs_km - self.r_gcrs_km
+        return frame_to_body(s / np.linalg.norm(s, axis=1, keepdims=True), self.q_wxyz)
+
+    def itrs_to_body(
+        self,
+        v_itrs: FloatArray,
+        *,
+        t_utc_s: FloatArray | None = None,
+        q_wxyz: FloatArray | None = None,
+    ) -> FloatArray:
+        """Vectors in ITRS → body axes (GCRS attitude ``q_wxyz``, default the world's)."""
+        t = self.t_utc_s if t_utc_s is None else t_utc_s
+        q = self.q_wxyz if q_wxyz is None else q_wxyz
+        return frame_to_body(frames.itrs_to_gcrs(v_itrs, t), q)
+
+    def kinematics_at(self, t_utc_s: FloatArray) -> Kinematics:
+        """Orbit and attitude of this world's spacecraft at other times."""
+        return kinematics(self.tle, self.attitude, t_utc_s)
+
+    def field_body_nt(
+        self,
+        t_utc_s: FloatArray,
+        *,
+        r_itrs_km: FloatArray | None = None,
+        q_wxyz: FloatArray | None = None,
+        field: str | None = None,
+    ) -> FloatArray:
+        """Reference field in body axes at any times [nT], shape (N, 3).
+
+        Position and attitude default to the world's orbit and attitude profile at ``t_utc_s``.
+        """
+        if r_itrs_km is None or q_wxyz is None:
+            kin = self.kinematics_at(t_utc_s)
+            r_itrs_km = kin.r_itrs_km if r_itrs_km is None else r_itrs_km
+            q_wxyz = kin.q_wxyz if q_wxyz is None else q_wxyz
+        b_itrs = reference_field_itrs_nt(t_utc_s, r_itrs_km, field=field or self.field)
+        return self.itrs_to_body(b_itrs, t_utc_s=t_utc_s, q_wxyz=q_wxyz)
+
+
+# --- the world -----------------------------------------------------------------------------------
+
+
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_jsonable(v) for v in x]
+    return x
+
+
+def _rms(x: FloatArray) -> float:
+    return float(np.sqrt(np.mean(np.sum(x**2, axis=-1)))) if x.size else 0.0
+
+
+@dataclass
+class World:
+    """A simulated world: telemetry plus its ground truth.
+
+    Attributes
+    ----------
+    telemetry : Telemetry
+        What the spacecraft downlinks (CONTRACT section 1).
+    tle : TleSet
+        The element set the operator has (the one written with the world).
+    sensor : SensorModel
+        True sensor parameters.
+    effects : list of Effect
+        Injected effects.
+    b_ref_body_nt : ndarray, shape (N, 3)
+        Reference field in body axes (the calibration target) [nT].
+    injected_body_nt : dict of str to ndarray, shape (N, 3)
+        Each effect's field-equivalent disturbance in body axes [nT].
+    truth : dict
+        JSON-ready ground truth (see :meth:`write`).
+    """
+
+    telemetry: Telemetry
+    tle: TleSet
+    sensor: SensorModel
+    effects: list[Effect]
+    b_ref_body_nt: FloatArray
+    injected_body_nt: dict[str, FloatArray]
+    truth: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def b_true_body_nt(self) -> FloatArray:
+        """The field the sensor saw: reference plus every injected disturbance [nT]."""
+        total = self.b_ref_body_nt.copy()
+        for db in self.injected_body_nt.values():
+            total = total + db
+        return total
+
+    def write(self, directory: str | Path, *, fmt: str = "csv") -> dict[str, Path]:
+        """Write the world as a directory.
+
+        Files: ``telemetry.<fmt>`` (CONTRACT section 1), ``spacecraft.tle`` (the operator's
+        element set), ``truth.json`` (sensor, effects, parameters, RMS, attitude, field, seed) and
+        ``truth_samples.parquet`` (per sample: time, reference field and each injected field in
+        body axes [nT]).
+
+        Returns
+        -------
+        dict of str to Path
+            ``telemetry``, ``tle``, ``truth``, ``truth_samples``.
+        """
+        out = Path(directory)
+        out.mkdir(parents=True, exist_ok=True)
+        paths = {
+            "telemetry": out / f"telemetry.{fmt}",
+            "tle": out / "spacecraft.tle",
+            "truth": out / "truth.json",
+            "truth_samples": out / "truth_samples.parquet",
+        }
+        format_from_path(paths["telemetry"])  # validates fmt
+        write_telemetry(paths["telemetry"], self.telemetry)
+        paths["tle"].write_text(self.tle.text)
+        truth = dict(self.truth)
+        truth["files"] = {k: p.name for k, p in paths.items()}
+        paths["truth"].write_text(json.dumps(_jsonable(truth), indent=2) + "\n")
+        samples: dict[str, Any] = {"time": utc_s_to_iso(self.telemetry.t_utc_s)}
+        for j, axis in enumerate("xyz"):
+            samples[f"b_ref_{axis}"] = self.b_ref_body_nt[:, j]
+        for name, db in self.injected_body_nt.items():
+            for j, axis in enumerate("xyz"):
+                samples[f"db_{name}_{axis}"] = db[:, j]
+        pd.DataFrame(samples).to_parquet(paths["truth_samples"], index=False)
+        return paths
+
+
+def simulate_world(
+    tle: TleSet | str,
+    *,
+    start_utc_s: float,
+    duration_s: float,
+    cadence_s: float,
+    rng: np.random.Generator,
+    attitude: AttitudeProfile | None = None,
+    sensor: SensorModel | None = None,
+    effects: Sequence[Effect] = (),
+    field: str = "IGRF-14",
+    housekeeping: Housekeeping | None = None,
+    include_position: bool = False,
+    norad_id: int | None = None,
+    seed: int | None = None,
+) -> World:
+    """Simulate a spacecraft's magnetometer telemetry with known ground truth.
+
+    Parameters
+    ----------
+    tle : TleSet or str
+        The element set (or a TLE file's text: the set nearest ``start_utc_s`` is chosen).
+    start_utc_s : float
+        First sample, POSIX seconds of UTC [s].
+    duration_s, cadence_s : float
+        Span and sampling interval [s].
+    rng : numpy.random.Generator
+        The one source of randomness (child generators are spawned for the sensor, the
+        housekeeping and each effect in order, so results are reproducible).
+    attitude : AttitudeProfile or None
+        Default nadir pointing (LVLH).
+    sensor : SensorModel or None
+        Default ``SensorModel.random(rng=...)`` (Wang 2020-like spread, σ = 2 nT).
+    effects : sequence of Effect
+        Disturbances to inject (CONTRACT section-5 names).
+    field : str
+        Reference field name (``orbitcal.field.get_field``), default ``"IGRF-14"``.
+    housekeeping : Housekeeping or None
+        Thermal cycle and magnetorquer command parameters.
+    include_position : bool
+        Add ``r_x, r_y, r_z`` (ITRS, from the TLE) to the telemetry.
+    norad_id : int or None
+        Spacecraft to pick when ``tle`` is a file's text.
+    seed : int or None
+        Recorded in the truth (the caller made ``rng`` from it).
+
+    Returns
+    -------
+    World
+    """
+    if duration_s <= 0 or cadence_s <= 0:
+        raise ValueError("duration_s and cadence_s must be positive")
+    tle_set = (
+        tle if isinstance(tle, TleSet) else select_tle(tle, norad_id=norad_id, at_utc_s=start_utc_s)
+    )
+    profile: AttitudeProfile = attitude if attitude is not None else NadirLVLH()
+    housekeeping = housekeeping or Housekeeping()
+    children = rng.spawn(3 + len(effects))
+    sensor_rng, hk_rng, noise_rng, effect_rngs = children[0], children[1], children[2], children[3:]
+    sensor = sensor or SensorModel.random(rng=sensor_rng)
+
+    n = int(np.floor(duration_s / cadence_s + 1e-9))
+    t = np.asarray(start_utc_s + np.arange(n) * cadence_s, dtype=np.float64)
+    kin = kinematics(tle_set, profile, t)
+    state = WorldState(
+        tle=tle_set,
+        attitude=profile,
+        field=field,
+        kin=kin,
+        housekeeping=housekeeping,
+        hk_rng=hk_rng,
+    )
+
+    injected: dict[str, FloatArray] = {}
+    effect_truth: list[dict[str, Any]] = []
+    extra_hk: dict[str, FloatArray] = {}
+    for effect, erng in zip(effects, effect_rngs, strict=True):
+        inj = effect.inject(state, erng)
+        key = effect.name if effect.name not in injected else f"{effect.name}_{len(injected)}"
+        injected[key] = np.asarray(inj.db_body_nt, dtype=np.float64)
+        extra_hk.update(inj.hk)
+        effect_truth.append(
+            {
+                "name": effect.name,
+                "params": _jsonable(effect.params),
+                "rms_nt": _rms(injected[key]),
+                "axis_rms_nt": np.sqrt(np.mean(injected[key] ** 2, axis=0)).tolist(),
+                "max_nt": float(np.max(np.linalg.norm(injected[key], axis=1))) if n else 0.0,
+                **({"info": _jsonable(inj.info)} if inj.info else {}),
+            }
+        )
+
+    b_true = state.b_ref_body_nt.copy()
+    for db in injected.values():
+        b_true += db
+    b_raw = sensor.measure(b_true, rng=noise_rng)
+
+    temperature = extra_hk.pop("temperature", state.temperature_c)
+    mtq = state.mtq_am2
+    hk = {k: np.asarray(v) for k, v in extra_hk.items() if k.startswith("hk_")}
+    telemetry = Telemetry(
+        t_utc_s=t,
+        b_raw_nt=b_raw,
+        q_wxyz=kin.q_wxyz,
+        r_itrs_km=kin.r_itrs_km if include_position else None,
+        temperature_c=np.asarray(temperature, dtype=np.float64),
+        mtq_am2=mtq,
+        hk=hk,
+    )
+    truth: dict[str, Any] = {
+        "spacecraft": str(tle_set.norad_id),
+        "tle": {"name": tle_set.name, "line1": tle_set.line1, "line2": tle_set.line2},
+        "start": utc_s_to_iso([start_utc_s])[0],
+        "end": utc_s_to_iso([t[-1]])[0] if n else None,
+        "n": n,
+        "cadence_s": cadence_s,
+        "attitude": profile.to_dict(),
+        "attitude_frame": "GCRS",
+        "reference_field": field,
+        "sensor": sensor.to_dict(),
+        "linear": sensor.linear,
+        "effects": effect_truth,
+        "verdict": effect_truth[0]["name"]
+        if len(effect_truth) == 1
+        else ("none" if not effect_truth else "multiple"),
+        "housekeeping": _jsonable(housekeeping.__dict__),
+        "eclipse_fraction": float(np.mean(state.illumination < 0.5)) if n else 0.0,
+        "b_ref_rms_nt": _rms(state.b_ref_body_nt),
+        "seed": seed,
+    }
+    return World(
+        telemetry=telemetry,
+        tle=tle_set,
+        sensor=sensor,
+        effects=list(effects),
+        b_ref_body_nt=state.b_ref_body_nt,
+        injected_body_nt=injected,
+        truth=truth,
+    )
