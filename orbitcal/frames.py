@@ -42,6 +42,8 @@ __all__ = [
     "earth_rotation_angle_rad",
     "gcrs_to_itrs",
     "gcrs_to_itrs_matrix",
+    "gcrs_to_teme",
+    "gcrs_to_teme_matrix",
     "geodetic_to_itrs",
     "gmst82_rad",
     "itrs_to_gcrs",
@@ -52,6 +54,7 @@ __all__ = [
     "nec_basis_itrs",
     "nec_to_itrs",
     "spherical_to_itrs",
+    "teme_to_gcrs",
     "teme_to_itrs",
     "teme_to_itrs_matrix",
 ]
@@ -205,22 +208,27 @@ def _grid_cached(
     return value
 
 
-def _slow_parts(tt_s: FloatArray, step_s: float) -> tuple[FloatArray, FloatArray, FloatArray, bool]:
-    """Interpolated C (N,3,3), W (N,3,3), ΔT (N,) and whether W is the identity."""
+def _slow_parts(
+    tt_s: FloatArray, step_s: float, *, need_c: bool = True
+) -> tuple[FloatArray | None, FloatArray | None, FloatArray]:
+    """Interpolated C (N,3,3), W (N,3,3) or None when W = I, and ΔT = TT − UT1 [s] (N,)."""
     x = tt_s / step_s
     k = np.floor(x)
-    frac = (x - k)[:, None]
+    frac = x - k
     k_int = k.astype(np.int64)
     # Evaluate only the grid nodes the samples need, in one Skyfield call (cached).
     needed = np.unique(np.concatenate([k_int, k_int + 1]))
     c_all, w_all, dt_all = _grid_cached(needed, step_s)
     i0 = np.searchsorted(needed, k_int)
     i1 = i0 + 1
-    c_n = c_all[i0] + (c_all[i1] - c_all[i0]) * frac[:, :, None]
-    dt_n = dt_all[i0] + (dt_all[i1] - dt_all[i0]) * frac[:, 0]
-    w_is_identity = bool(np.all(w_all == np.eye(3)))
-    w_n = w_all[i0] + (w_all[i1] - w_all[i0]) * frac[:, :, None]
-    return c_n, w_n, dt_n, w_is_identity
+    dt_n = dt_all[i0] + (dt_all[i1] - dt_all[i0]) * frac
+    c_n = None
+    if need_c:
+        c_n = c_all[i0] + (c_all[i1] - c_all[i0]) * frac[:, None, None]
+    w_n = None
+    if not np.all(w_all == np.eye(3)):
+        w_n = w_all[i0] + (w_all[i1] - w_all[i0]) * frac[:, None, None]
+    return c_n, w_n, dt_n
 
 
 def gcrs_to_itrs_matrix(t_utc_s: npt.ArrayLike, *, step_s: float = _DEFAULT_STEP_S) -> FloatArray:
@@ -247,10 +255,11 @@ def gcrs_to_itrs_matrix(t_utc_s: npt.ArrayLike, *, step_s: float = _DEFAULT_STEP
     tt_s = _tt_s(t)
     if not np.all(np.isfinite(tt_s)):
         raise ValueError("t_utc_s before 1972-01-01 is outside the leap-second table")
-    c, w, delta_t_s, w_identity = _slow_parts(tt_s, float(step_s))
+    c, w, delta_t_s = _slow_parts(tt_s, float(step_s))
+    assert c is not None
     era = earth_rotation_angle_rad(tt_s - delta_t_s)
     m = _r3_rows(era, c)
-    if not w_identity:
+    if w is not None:
         m = np.einsum("nij,njk->nik", w, m)
     return m
 
@@ -285,21 +294,24 @@ def itrs_to_gcrs(
 # --- TEME ---------------------------------------------------------------------------------------
 
 
-def _ut1_and_w(t: FloatArray, step_s: float) -> tuple[FloatArray, FloatArray, bool]:
+def _ut1_and_w(t: FloatArray, step_s: float) -> tuple[FloatArray, FloatArray | None]:
+    """UT1 as a POSIX-style count [s] and polar motion W (None when W = I)."""
     tt_s = _tt_s(t)
     if not np.all(np.isfinite(tt_s)):
         raise ValueError("t_utc_s must be finite and on or after 1972-01-01")
-    _, w, delta_t_s, w_identity = _slow_parts(tt_s, step_s)
-    return tt_s - delta_t_s, w, w_identity
+    if t.size == 0:
+        return tt_s, None
+    _, w, delta_t_s = _slow_parts(tt_s, step_s, need_c=False)
+    return tt_s - delta_t_s, w
 
 
 def teme_to_itrs_matrix(t_utc_s: npt.ArrayLike, *, step_s: float = _DEFAULT_STEP_S) -> FloatArray:
     """Rotation matrices TEME → ITRS, ``W · R3(θ_GMST82(UT1))``, shape (N, 3, 3)."""
     t = _times(t_utc_s)
-    t_ut1_s, w, w_identity = _ut1_and_w(t, float(step_s))
+    t_ut1_s, w = _ut1_and_w(t, float(step_s))
     theta, _ = gmst82_rad(t_ut1_s)
     m = _r3_rows(theta, np.broadcast_to(np.eye(3), (t.size, 3, 3)).copy())
-    if not w_identity:
+    if w is not None:
         m = np.einsum("nij,njk->nik", w, m)
     return m
 
@@ -332,7 +344,7 @@ def teme_to_itrs(
     t = _times(t_utc_s)
     r = _vec(r_teme_km, "r_teme_km")
     v = _vec(v_teme_km_s, "v_teme_km_s")
-    t_ut1_s, w, w_identity = _ut1_and_w(t, float(step_s))
+    t_ut1_s, w = _ut1_and_w(t, float(step_s))
     theta, theta_dot = gmst82_rad(t_ut1_s)
     c, s = np.cos(theta), np.sin(theta)
     r, v = np.broadcast_arrays(r, v)
@@ -342,7 +354,7 @@ def teme_to_itrs(
     v_pef = v_rot + np.stack(
         [theta_dot * r_pef[..., 1], -theta_dot * r_pef[..., 0], np.zeros_like(theta)], -1
     )
-    if w_identity:
+    if w is None:
         return r_pef, v_pef
     return _mv(w, r_pef), _mv(w, v_pef)
 
@@ -358,10 +370,10 @@ def itrs_to_teme(
     t = _times(t_utc_s)
     r = _vec(r_itrs_km, "r_itrs_km")
     v = _vec(v_itrs_km_s, "v_itrs_km_s")
-    t_ut1_s, w, w_identity = _ut1_and_w(t, float(step_s))
+    t_ut1_s, w = _ut1_and_w(t, float(step_s))
     theta, theta_dot = gmst82_rad(t_ut1_s)
     r, v = np.broadcast_arrays(r, v)
-    if not w_identity:
+    if w is not None:
         r, v = _mtv(w, r), _mtv(w, v)
     v_rot = v - np.stack([theta_dot * r[..., 1], -theta_dot * r[..., 0], np.zeros_like(theta)], -1)
     c, s = np.cos(theta), np.sin(theta)
@@ -375,6 +387,42 @@ def itrs_to_teme(
         -1,
     )
     return r_teme, v_teme
+
+
+def gcrs_to_teme_matrix(t_utc_s: npt.ArrayLike, *, step_s: float = _DEFAULT_STEP_S) -> FloatArray:
+    """Rotation matrices GCRS → TEME, ``R3(θ_GMST82 − ERA) · C`` (Earth rotation cancels).
+
+    Equal to Skyfield's ``sgp4lib.TEME.rotation_at(t)``; shape (N, 3, 3).
+    """
+    t = _times(t_utc_s)
+    if t.size == 0:
+        return np.empty((0, 3, 3))
+    tt_s = _tt_s(t)
+    if not np.all(np.isfinite(tt_s)):
+        raise ValueError("t_utc_s must be finite and on or after 1972-01-01")
+    c, _, delta_t_s = _slow_parts(tt_s, float(step_s))
+    assert c is not None
+    t_ut1_s = tt_s - delta_t_s
+    theta, _ = gmst82_rad(t_ut1_s)
+    return _r3_rows(earth_rotation_angle_rad(t_ut1_s) - theta, c)
+
+
+def gcrs_to_teme(
+    v_gcrs: npt.ArrayLike, t_utc_s: npt.ArrayLike, *, step_s: float = _DEFAULT_STEP_S
+) -> FloatArray:
+    """Rotate vectors GCRS → TEME (positions [km] or, both frames being quasi-inertial,
+    velocities [km/s]; the frames' own precession-nutation rate, < 1e-11 rad/s, is neglected).
+
+    Shapes: ``v_gcrs`` (N, 3) or (3,), ``t_utc_s`` (N,) → (N, 3).
+    """
+    return _mv(gcrs_to_teme_matrix(t_utc_s, step_s=step_s), _vec(v_gcrs, "v_gcrs"))
+
+
+def teme_to_gcrs(
+    v_teme: npt.ArrayLike, t_utc_s: npt.ArrayLike, *, step_s: float = _DEFAULT_STEP_S
+) -> FloatArray:
+    """Rotate vectors TEME → GCRS (inverse of :func:`gcrs_to_teme`); shapes as there."""
+    return _mtv(gcrs_to_teme_matrix(t_utc_s, step_s=step_s), _vec(v_teme, "v_teme"))
 
 
 # --- spherical, geodetic ------------------------------------------------------------------------

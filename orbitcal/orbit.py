@@ -13,9 +13,10 @@ by default) relative to a sample raise a :class:`StaleElementsWarning`.
 
 from __future__ import annotations
 
+import json
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
@@ -199,10 +200,31 @@ class Orbit:
         Element epoch, POSIX seconds of UTC [s].
     """
 
-    satrec: Satrec
+    satrec: Satrec = field(compare=False)
     norad_id: int
     name: str
     epoch_utc_s: float
+    #: Where the elements came from: ``("tle", line1, line2)`` or ``("omm", json_text)``; used
+    #: to pickle the orbit (a ``Satrec`` cannot be pickled) and by :attr:`tle_lines`.
+    source: tuple[str, ...] = field(default=(), repr=False)
+
+    def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
+        return (_orbit_from_source, (self.source, self.name))
+
+    @property
+    def tle_lines(self) -> tuple[str, str]:
+        """The two TLE lines (as read, or exported by ``sgp4.exporter`` for an OMM origin)."""
+        if self.source and self.source[0] == "tle":
+            return self.source[1], self.source[2]
+        from sgp4.exporter import export_tle
+
+        line1, line2 = export_tle(self.satrec)
+        return line1, line2
+
+    def to_tle_text(self) -> str:
+        """Name line (if any) and the two lines, newline-terminated, as ``from_tle`` reads it."""
+        lines = [self.name] if self.name else []
+        return "\n".join([*lines, *self.tle_lines]) + "\n"
 
     @classmethod
     def from_tle(cls, text: str, *, name: str | None = None, verify_checksum: bool = True) -> Orbit:
@@ -253,7 +275,7 @@ class Orbit:
                 f"TLE elements rejected by SGP4 initialisation: error {satrec.error} "
                 f"({SGP4_ERRORS.get(satrec.error, 'unknown')})"
             )
-        return cls._from_satrec(satrec, name if name is not None else title)
+        return cls._from_satrec(satrec, name if name is not None else title, ("tle", line1, line2))
 
     @classmethod
     def from_omm(cls, fields: Mapping[str, Any], *, name: str | None = None) -> Orbit:
@@ -301,12 +323,18 @@ class Orbit:
                 f"({SGP4_ERRORS.get(satrec.error, 'unknown')})"
             )
         title = name if name is not None else texts.get("OBJECT_NAME", "")
-        return cls._from_satrec(satrec, title)
+        return cls._from_satrec(satrec, title, ("omm", json.dumps(texts, sort_keys=True)))
 
     @classmethod
-    def _from_satrec(cls, satrec: Satrec, name: str) -> Orbit:
+    def _from_satrec(cls, satrec: Satrec, name: str, source: tuple[str, ...]) -> Orbit:
         epoch_utc_s = (satrec.jdsatepoch - _UNIX_EPOCH_JD) * _DAY_S + satrec.jdsatepochF * _DAY_S
-        return cls(satrec=satrec, norad_id=int(satrec.satnum), name=name, epoch_utc_s=epoch_utc_s)
+        return cls(
+            satrec=satrec,
+            norad_id=int(satrec.satnum),
+            name=name,
+            epoch_utc_s=epoch_utc_s,
+            source=source,
+        )
 
     def propagate(
         self, t_utc_s: npt.ArrayLike, *, max_age_days: float | None = DEFAULT_MAX_AGE_DAYS
@@ -340,6 +368,15 @@ class Orbit:
         v = np.where(ok[:, None], v, np.nan)
         r_itrs, v_itrs = _to_itrs(r, v, t, ok)
         return Ephemeris(r, v, r_itrs, v_itrs, error_code, t)
+
+
+def _orbit_from_source(source: tuple[str, ...], name: str) -> Orbit:
+    """Rebuild an :class:`Orbit` from its ``source`` (unpickling)."""
+    if source and source[0] == "tle":
+        return Orbit.from_tle(f"{source[1]}\n{source[2]}", name=name, verify_checksum=False)
+    if source and source[0] == "omm":
+        return Orbit.from_omm(json.loads(source[1]), name=name)
+    raise OrbitError("this Orbit has no recorded source (TLE or OMM) and cannot be rebuilt")
 
 
 def propagate_many(

@@ -103,6 +103,18 @@ def test_teme_to_itrs_matches_skyfield() -> None:
     np.testing.assert_allclose(v_t, v, atol=1e-12)
 
 
+def test_teme_gcrs_matches_skyfield() -> None:
+    rng = np.random.default_rng(17)
+    t = rng.uniform(T_2000, T_2026, 800)
+    ref = np.moveaxis(TEME.rotation_at(utc_s_to_skyfield(t)), -1, 0)
+    assert (_rotation_angle_rad(fr.gcrs_to_teme_matrix(t), ref) / ARCSEC).max() < 1e-3
+    r = rng.normal(size=(800, 3)) * 7000.0
+    np.testing.assert_allclose(fr.teme_to_gcrs(fr.gcrs_to_teme(r, t), t), r, atol=1e-9)
+    # Consistent with the ITRS path: TEME → ITRS → GCRS.
+    via_itrs = fr.itrs_to_gcrs(np.einsum("nij,nj->ni", fr.teme_to_itrs_matrix(t), r), t)
+    np.testing.assert_allclose(fr.teme_to_gcrs(r, t), via_itrs, atol=1e-7)
+
+
 def test_spherical_round_trip_and_chaosmagpy() -> None:
     from chaosmagpy.coordinate_utils import cartesian_to_spherical
 

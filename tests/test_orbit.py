@@ -228,3 +228,17 @@ def test_ephemeris_is_a_frozen_dataclass() -> None:
     assert eph.valid.tolist() == [True]
     with pytest.raises(AttributeError):
         eph.error_code = np.zeros(1, dtype=np.int64)  # type: ignore[misc]
+
+
+def test_orbit_pickles_and_writes_its_tle() -> None:
+    import pickle
+
+    orbit = Orbit.from_tle(SWARM_A)
+    again = pickle.loads(pickle.dumps(orbit))
+    assert again == orbit and again.name == "SWARM A"
+    assert orbit.to_tle_text() == SWARM_A
+    omm = Orbit.from_omm(export_omm(orbit.satrec, "SWARM A"))
+    again = pickle.loads(pickle.dumps(omm))
+    t = orbit.epoch_utc_s + np.arange(0.0, 3600.0, 60.0)
+    np.testing.assert_array_equal(again.propagate(t).r_teme_km, omm.propagate(t).r_teme_km)
+    assert Orbit.from_tle(omm.to_tle_text()).norad_id == 39452
