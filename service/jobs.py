@@ -11,7 +11,6 @@ and is recorded on the job. A lock row per spacecraft keeps retrainings of one s
 from __future__ import annotations
 
 import logging
-import math
 import subprocess
 import time
 import uuid
@@ -26,6 +25,7 @@ import sqlalchemy as sa
 from sqlalchemy.engine import Engine
 
 import orbitcal
+from orbitcal.calibrate.holdout import later_block_split
 from orbitcal.telemetry import Telemetry
 from orbitcal.timescales import utc_s_to_iso
 from service import science
@@ -207,16 +207,20 @@ def _retrain(
         rng=rng,
     )
     # Score challenger and champion on the same later block that the fit did not see.
-    n_hold = max(1, math.ceil(n * holdout_fraction))
+    # (the same later-block split as the pipeline's; telemetry is time-ordered)
+    _train, hold_mask = later_block_split(telemetry.t_utc_s, holdout_fraction)
+    n_hold = int(np.count_nonzero(hold_mask))
+    if n_hold == 0:
+        raise ValueError("holdout_fraction leaves no held-out samples to compare calibrations on")
     holdout = _subset(telemetry, slice(n - n_hold, n))
     b_ref = science.reference_body_nt(
         holdout, orbit=orbit, attitude_frame=sc.attitude_frame, field=field
     )
-    challenger_rms = _rms(science.apply_linear(document, holdout.b_raw_nt), b_ref)
+    challenger_rms = _rms(science.apply_document(document, holdout), b_ref)
     champion_rms = (
         None
         if champion is None
-        else _rms(science.apply_linear(champion.document, holdout.b_raw_nt), b_ref)
+        else _rms(science.apply_document(champion.document, holdout), b_ref)
     )
     span = utc_s_to_iso([float(holdout.t_utc_s[0]), float(holdout.t_utc_s[-1])])
     if champion_rms is None:
@@ -343,7 +347,9 @@ def run_retrain(
         status = "succeeded"
     except Exception as exc:  # a failed job is recorded, never raised into the runner
         error = f"{type(exc).__name__}: {exc}"
-        log.warning("retraining failed", extra={"job_id": job_id, "spacecraft": sc.id})
+        log.warning(
+            "retraining failed", extra={"job_id": job_id, "spacecraft": sc.id, "error": error}
+        )
     finally:
         with write_tx(engine) as conn:
             conn.execute(

@@ -13,6 +13,7 @@ import numpy as np
 from orbitcal.telemetry import Telemetry
 
 __all__ = [
+    "apply_document",
     "apply_linear",
     "diagnose",
     "fit_calibration",
@@ -27,9 +28,10 @@ def load_orbit(tle: str | None, omm: dict[str, Any] | None) -> Any:
         return None
     from orbitcal.orbit import Orbit
 
-    if tle is not None:
-        return Orbit.from_tle(tle)
-    return Orbit.from_omm(omm)
+    if tle is None:
+        assert omm is not None
+        return Orbit.from_omm(omm)
+    return Orbit.from_tle(tle)
 
 
 def reference_body_nt(
@@ -67,6 +69,13 @@ def fit_calibration(
         rng=rng,
     )
     return dict(document)
+
+
+def apply_document(document: dict[str, Any], telemetry: Telemetry) -> np.ndarray:
+    """Calibrated field ``(N, 3)`` [nT, body] with the document's full model (housekeeping too)."""
+    from orbitcal.pipeline import apply_document as apply
+
+    return np.asarray(apply(document, telemetry))
 
 
 def apply_linear(document: dict[str, Any], b_raw_nt: np.ndarray) -> np.ndarray:

@@ -88,3 +88,27 @@ def pg_schema_url() -> Iterator[str]:
         with admin.begin() as conn:
             conn.execute(sa.text(f"DROP SCHEMA IF EXISTS {schema} CASCADE"))
         admin.dispose()
+
+
+def wait_job(client: httpx.Client, job_id: str, *, timeout_s: float = 120.0) -> dict[str, Any]:
+    """Poll ``GET /v1/jobs/{id}`` until it finishes (bounded)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        job = client.get(f"/v1/jobs/{job_id}").json()
+        if job["status"] in ("succeeded", "failed"):
+            return job  # type: ignore[no-any-return]
+        time.sleep(0.1)
+    raise AssertionError(f"job {job_id} did not finish in {timeout_s} s")
+
+
+def wait_versions(
+    client: httpx.Client, spacecraft: str, n: int, *, timeout_s: float = 120.0
+) -> list[dict[str, Any]]:
+    """Poll the version list until it holds ``n`` versions and no job is live (bounded)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        versions = client.get(f"/v1/spacecraft/{spacecraft}/calibrations").json()
+        if len(versions) >= n:
+            return versions  # type: ignore[no-any-return]
+        time.sleep(0.2)
+    raise AssertionError(f"{spacecraft} did not reach {n} calibration versions in {timeout_s} s")

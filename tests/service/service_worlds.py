@@ -1,24 +1,32 @@
-"""Synthetic telemetry for the service tests: known sensor parameters on a known trajectory.
+"""Synthetic telemetry for the service tests: known sensor parameters on a real orbit.
 
 The reference field comes from the library (``orbitcal.truth.truth_body_nt``, IGRF-14); the raw
 readings are ``b_raw = inv(M) @ b_body + o + noise`` so that the calibration
-``b_cal = M @ (b_raw - o)`` is known exactly. Positions are a circular 500 km orbit inclined
-87.4° (Swarm-like), attitude a slow tumble, so all 12 parameters are observable.
+``b_cal = M @ (b_raw - o)`` is known exactly. Positions come from SGP4 on a real Swarm A TLE
+(CelesTrak, epoch 2022-08-01, ``tests/authorities/swarm_iss_real_tles.tle``) — the service
+computes them from the same TLE — and the attitude is a slow tumble, so all 12 parameters are
+observable.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pandas as pd
 from scipy.spatial.transform import Rotation
 
+from orbitcal.orbit import Orbit
 from orbitcal.truth import truth_body_nt
 
+#: Swarm A (NORAD 39452), CelesTrak, epoch 2022-08-01T12:28Z (tests/authorities/README.md).
+SWARM_A_TLE = (
+    "1 39452U 13067B   22213.51971877  .00001645  00000+0  50768-4 0  9990\n"
+    "2 39452  87.3611 208.4349 0002354 100.1496 260.0021 15.32769581488835"
+)
+
 T0_UTC_S = 1_659_312_000.0  # 2022-08-01T00:00:00Z
-R_KM = 6371.2 + 500.0
-PERIOD_S = 5670.0
 
 
 @dataclass(frozen=True)
@@ -46,21 +54,11 @@ SENSOR_B = Sensor(
 
 
 def trajectory(t_utc_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Positions ``(N, 3)`` ITRS [km] and attitudes ``(N, 4)`` (w, x, y, z) at ``t_utc_s``."""
+    """Positions ``(N, 3)`` ITRS [km] (SGP4, Swarm A) and attitudes ``(N, 4)`` (w, x, y, z)."""
     dt = t_utc_s - T0_UTC_S
-    u = 2 * np.pi * dt / PERIOD_S
-    inc = np.radians(87.4)
-    raan = -2 * np.pi * dt / 86164.0  # Earth turns under the orbit plane
-    x_orb = np.cos(u)
-    y_orb = np.sin(u)
-    r = np.stack(
-        [
-            R_KM * (np.cos(raan) * x_orb - np.sin(raan) * np.cos(inc) * y_orb),
-            R_KM * (np.sin(raan) * x_orb + np.cos(raan) * np.cos(inc) * y_orb),
-            R_KM * np.sin(inc) * y_orb,
-        ],
-        axis=-1,
-    )
+    eph = Orbit.from_tle(SWARM_A_TLE).propagate(t_utc_s)
+    assert not np.any(eph.error_code)
+    r = np.asarray(eph.r_itrs_km)
     rotvec = np.stack([dt * 2e-3, dt * 1.3e-3 + 0.4, np.full_like(dt, 0.7) + dt * 0.7e-3], axis=-1)
     xyzw = Rotation.from_rotvec(rotvec).as_quat()
     q_wxyz = np.concatenate([xyzw[:, 3:], xyzw[:, :3]], axis=1)
@@ -74,8 +72,12 @@ def world(
     dt_s: float = 10.0,
     sensor: Sensor = SENSOR_A,
     seed: int = 0,
+    positions: bool = True,
 ) -> tuple[pd.DataFrame, np.ndarray]:
-    """A telemetry table (CONTRACT section-1 columns) and the true ``b_body_nt`` ``(N, 3)``."""
+    """A telemetry table (CONTRACT section-1 columns) and the true ``b_body_nt`` ``(N, 3)``.
+
+    ``positions=False`` leaves out ``r_x, r_y, r_z`` (the service then propagates the TLE).
+    """
     rng = np.random.default_rng(seed)
     t = start_utc_s + dt_s * np.arange(n)
     r, q = trajectory(t)
@@ -96,19 +98,23 @@ def world(
             "r_z": r[:, 2],
         }
     )
+    if not positions:
+        df = df.drop(columns=["r_x", "r_y", "r_z"])
     return df, b_body
 
 
-def document_for(sensor: Sensor, *, method: str = "linear") -> dict[str, object]:
-    """A section-4 document holding a sensor's exact calibration (what an oracle would fit)."""
-    return {
-        "spacecraft": "",
-        "version": 0,
-        "method": method,
-        "created_at": "",
-        "reference_field": "IGRF-14",
-        "data": {"start": "", "end": "", "n": 0},
-        "metrics": {"holdout_rms_nt": float("nan")},
-        "linear": {"M": sensor.M.tolist(), "o": sensor.o.tolist()},
-        "model": {},
-    }
+def document_for(sensor: Sensor, *, method: str = "linear") -> dict[str, Any]:
+    """The section-4 document of a sensor's exact calibration (what an oracle would fit)."""
+    from orbitcal.calibrate.base import AffineCalibration
+    from orbitcal.calibrate.document import calibration_to_document
+
+    return calibration_to_document(
+        AffineCalibration(method, sensor.M, sensor.o),
+        spacecraft="",
+        version=0,
+        reference_field="IGRF-14",
+        t_start_utc_s=T0_UTC_S,
+        t_end_utc_s=T0_UTC_S,
+        n_samples=0,
+        metrics={"holdout_rms_nt": float("nan")},
+    )
