@@ -14,6 +14,7 @@ by default) relative to a sample raise a :class:`StaleElementsWarning`.
 from __future__ import annotations
 
 import json
+import re
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -146,6 +147,44 @@ def _validate_tle_line(line: str, number: int, *, verify_checksum: bool) -> None
             )
 
 
+# Fixed-column numeric fields (1-based columns, CelesTrak "NORAD Two-Line Element Set Format";
+# Vallado et al. 2006 appendix A): (line, first column, last column, name, assumed-decimal form).
+_TLE_FIELDS: tuple[tuple[int, int, int, str, str], ...] = (
+    (1, 19, 32, "epoch (YYDDD.DDDDDDDD)", "float"),
+    (1, 34, 43, "first derivative of mean motion", "float"),
+    (1, 45, 52, "second derivative of mean motion", "exp"),
+    (1, 54, 61, "BSTAR drag term", "exp"),
+    (2, 9, 16, "inclination [deg]", "float"),
+    (2, 18, 25, "right ascension of the ascending node [deg]", "float"),
+    (2, 27, 33, "eccentricity (assumed leading decimal point)", "int"),
+    (2, 35, 42, "argument of perigee [deg]", "float"),
+    (2, 44, 51, "mean anomaly [deg]", "float"),
+    (2, 53, 63, "mean motion [rev/day]", "float"),
+)
+_EXP_FIELD_RE = re.compile(r"^\s*[+-]?\d*\s*[+-]\d$")
+
+
+def _validate_tle_fields(line1: str, line2: str) -> None:
+    for number, first, last, what, kind in _TLE_FIELDS:
+        line = line1 if number == 1 else line2
+        text = line[first - 1 : last]
+        ok = True
+        if kind == "float":
+            try:
+                float(text)
+            except ValueError:
+                ok = False
+        elif kind == "int":
+            ok = text.strip().isdigit()
+        else:
+            ok = bool(_EXP_FIELD_RE.match(text)) or text.strip() in {"", "0", "00000-0", "00000+0"}
+        if not ok:
+            raise TLEError(
+                f"TLE line {number}, columns {first}-{last} ({what}): {text!r} is not a number "
+                "in TLE format"
+            )
+
+
 def _check_age(epoch_utc_s: float, t: FloatArray, max_age_days: float | None, what: str) -> None:
     if max_age_days is None or t.size == 0:
         return
@@ -177,6 +216,8 @@ def _jd_fr(t_utc_s: FloatArray, ref: Orbit) -> tuple[FloatArray, FloatArray]:
 def _to_itrs(
     r_teme: FloatArray, v_teme: FloatArray, t: FloatArray, ok: npt.NDArray[np.bool_]
 ) -> tuple[FloatArray, FloatArray]:
+    if np.all(ok):
+        return teme_to_itrs(r_teme, v_teme, t)
     r_itrs = np.full_like(r_teme, np.nan)
     v_itrs = np.full_like(v_teme, np.nan)
     if np.any(ok):
@@ -262,6 +303,7 @@ class Orbit:
             )
         _validate_tle_line(line1, 1, verify_checksum=verify_checksum)
         _validate_tle_line(line2, 2, verify_checksum=verify_checksum)
+        _validate_tle_fields(line1, line2)
         if line1[2:7] != line2[2:7]:
             raise TLEError(
                 f"TLE line 1 is for catalogue number {line1[2:7]!r} but line 2 for {line2[2:7]!r}"

@@ -149,11 +149,12 @@ def test_tle_without_name_and_with_0_prefix() -> None:
         (lambda ls: [ls[0], ls[2], ls[1]], "line 1 must start"),
         (lambda ls: [ls[1]], "got 1 non-blank"),
         (lambda ls: [ls[0], ls[1], ls[2].replace("39452", "39451")], "catalogue number"),
+        (lambda ls: [ls[0], ls[1], ls[2][:9] + "8x.3500" + ls[2][16:]], "columns 9-16"),
     ],
 )
 def test_bad_tles_are_rejected_clearly(mutate: object, match: str) -> None:
     lines = mutate(SWARM_A.splitlines())  # type: ignore[operator]
-    if "catalogue" in match:  # keep the checksum right so the catalogue check is what fails
+    if "catalogue" in match or "columns" in match:  # right checksum: the content check must fail
         l2 = lines[2][:68]
         lines[2] = l2 + str(tle_checksum(l2))
     with pytest.raises(TLEError, match=match):
