@@ -101,11 +101,20 @@ class OnlineEllipsoid:
     P: FloatArray = field(default_factory=lambda: np.eye(10) * 1e6)
     n_seen: int = 0
     mean_norm_nt: float = 0.0
+    fixed_reference: bool = False
 
     def update(self, m_nt: FloatArray, b_ref_mag_nt: float | None = None) -> None:
         """Absorb one reading ``m`` (3,) [nT] with its reference magnitude [nT] (or, as in the
         patent, the running mean of ‖m‖ when ``None``)."""
         m = np.asarray(m_nt, dtype=np.float64).reshape(3)
+        if self.n_seen == 0:
+            self.fixed_reference = b_ref_mag_nt is None
+            if self.fixed_reference:
+                # a constant reference cannot separate the constant term from the scale:
+                # keep η10 at 0 (the patent's nine parameters) and rescale in calibration()
+                self.P[9, :] = 0.0
+                self.P[:, 9] = 0.0
+                self.eta[9] = 0.0
         self.n_seen += 1
         self.mean_norm_nt += (float(np.linalg.norm(m)) - self.mean_norm_nt) / self.n_seen
         ref = self.mean_norm_nt if b_ref_mag_nt is None else float(b_ref_mag_nt)
@@ -117,8 +126,18 @@ class OnlineEllipsoid:
         self.P = (self.P - np.outer(k, Pd)) / self.forgetting
 
     def calibration(self) -> AffineCalibration:
-        """The current calibration (patent steps 9-10)."""
-        return eta_to_calibration(self.eta, scale_nt=self.scale_nt)
+        """The current calibration (patent steps 9-10).
+
+        With the running-mean reference the fitted quadric is ``(m − X0)ᵀA(m − X0) = R̄² + X0ᵀAX0``
+        (scaled units), so ``G`` is rescaled to give ``‖G (m − X0)‖ = R̄``.
+        """
+        cal = eta_to_calibration(self.eta, scale_nt=self.scale_nt)
+        if self.fixed_reference:
+            x0 = cal.o / self.scale_nt
+            r2 = (self.mean_norm_nt / self.scale_nt) ** 2
+            A = cal.M.T @ cal.M
+            cal.M = cal.M * np.sqrt(r2 / (r2 + float(x0 @ A @ x0)))
+        return cal
 
 
 def fit_online(data: FitData, *, forgetting: float = 1.0) -> AffineCalibration:

@@ -67,7 +67,11 @@ def _twostep_linear(B: FloatArray, H2: FloatArray, method: str) -> tuple[FloatAr
     Bs = B / s
     z = (np.sum(B**2, axis=1) - H2) / s**2
     quad = [-(Bs[:, i] * Bs[:, j]) * (1.0 if i == j else 2.0) for i, j in _SYM]  # −Bᵀ E B terms
-    X = np.column_stack([*quad, 2 * Bs, -np.ones(len(Bs))])
+    # With a constant reference (ground use) the nuisance column is collinear with |B|² − H²
+    # and the system has the trivial solution I + E = 0; |b|² ≪ H² then, so step 1 drops it.
+    varying = float(np.ptp(H2)) > 1e-6 * float(np.median(H2))
+    nuisance = [-np.ones(len(Bs))] if varying else []
+    X = np.column_stack([*quad, 2 * Bs, *nuisance])
     cond = equilibrated_condition_number(X)
     if not cond < CONDITION_LIMIT:
         raise PoorCoverageError(method, cond, CONDITION_LIMIT)
