@@ -258,6 +258,9 @@ def parse_time_values(
 
     series = values if isinstance(values, pd.Series) else pd.Series(list(values))
     series = series.reset_index(drop=True)
+    if series.dtype != object and pd.api.types.is_string_dtype(series.dtype):
+        # pandas "string" / Arrow strings: plain Python strings with None for missing.
+        series = series.astype(object).where(series.notna(), None)
     n = len(series)
     reasons: dict[int, str] = {}
 

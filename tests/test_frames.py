@@ -152,6 +152,20 @@ def test_geodetic_against_skyfield_wgs84() -> None:
     np.testing.assert_allclose(h2, sky.elevation.km, atol=1e-6)
 
 
+def test_geodetic_poles_and_equator() -> None:
+    b_km = fr.WGS84_A_KM * (1.0 - 1.0 / fr.WGS84_INV_F)
+    np.testing.assert_allclose(fr.geodetic_to_itrs(90.0, 0.0, 0.0), [0.0, 0.0, b_km], atol=1e-9)
+    np.testing.assert_allclose(fr.geodetic_to_itrs(0.0, 0.0, 1.0), [fr.WGS84_A_KM + 1.0, 0, 0])
+    lat, lon, h = fr.itrs_to_geodetic(np.array([[0.0, 0.0, -b_km - 450.0], [fr.WGS84_A_KM, 0, 0]]))
+    np.testing.assert_allclose(lon, [0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(lat, [-90.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(h, [450.0, 0.0], atol=1e-9)
+    # Geodetic latitude exceeds geocentric latitude in the northern hemisphere (~0.19 deg at 45).
+    r = fr.geodetic_to_itrs(45.0, 10.0, 0.0)
+    geocentric_lat = 90.0 - fr.itrs_to_spherical(r)[1]
+    assert 45.0 - geocentric_lat == pytest.approx(0.1924, abs=1e-3)
+
+
 def test_nec_basis_against_chaosmagpy_use() -> None:
     from chaosmagpy.coordinate_utils import basevectors_use
 

@@ -116,6 +116,14 @@ def test_parse_iso_and_numbers() -> None:
     assert "yesterday" in errors[1][1]
 
 
+@pytest.mark.parametrize("dtype", [object, "string", "string[pyarrow]"])
+def test_parse_pandas_string_dtypes(dtype: str) -> None:
+    series = pd.Series(["2017-01-01T00:00:00Z", "1483228800.5", "bad", None], dtype=dtype)
+    t, errors = ts.parse_time_values(series)
+    np.testing.assert_array_equal(t[:2], [T_2017, T_2017 + 0.5])
+    assert [row for row, _ in errors] == [2, 3]
+
+
 def test_parse_numeric_array_and_nonfinite() -> None:
     t, errors = ts.parse_time_values(np.array([1.0, np.inf, 3.0]))
     assert [r for r, _ in errors] == [1]
