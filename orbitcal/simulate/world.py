@@ -35,6 +35,7 @@ import pandas as pd
 
 from orbitcal import frames
 from orbitcal.attitude import frame_to_body
+from orbitcal.orbit import Orbit
 from orbitcal.sensor import SensorModel
 from orbitcal.simulate.attitude_profiles import AttitudeProfile, NadirLVLH
 from orbitcal.sun import illumination_conical, sun_position_gcrs_km
@@ -159,46 +160,31 @@ class Kinematics:
     q_wxyz: FloatArray
 
 
-def _propagate_teme(tle: TleSet, t_utc_s: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """SGP4 positions [km] and velocities [km/s] in TEME; raises naming failing rows."""
-    try:
-        from orbitcal.orbit import Orbit
-    except ImportError:  # pragma: no cover - orbitcal.orbit not yet available
-        Orbit = None  # type: ignore[assignment,misc]
-    if Orbit is not None:
-        eph = Orbit.from_tle(tle.text).propagate(t_utc_s)
-        r, v, code = eph.r_teme_km, eph.v_teme_km_s, np.asarray(eph.error_code)
-    else:  # pragma: no cover
-        from sgp4.api import Satrec
+def kinematics(tle: TleSet, attitude: AttitudeProfile, t_utc_s: npt.ArrayLike) -> Kinematics:
+    """Orbit and attitude at the given times.
 
-        sat = Satrec.twoline2rv(tle.line1, tle.line2)
-        days = t_utc_s / 86400.0
-        jd = np.floor(days) + _UNIX_EPOCH_JD
-        fr = days - np.floor(days)
-        code, r, v = sat.sgp4_array(jd, fr)
-    bad = np.flatnonzero(np.asarray(code) != 0)
+    SGP4 through :class:`orbitcal.orbit.Orbit` (TEME, ITRS), TEME → GCRS with
+    :func:`orbitcal.frames.teme_to_gcrs` (a slow rotation, so velocities rotate as vectors).
+
+    Raises
+    ------
+    ValueError
+        When SGP4 fails at any sample (stale or decayed elements), naming the first.
+    """
+    t = np.asarray(t_utc_s, dtype=np.float64)
+    eph = Orbit.from_tle(tle.text).propagate(t, max_age_days=None)
+    code = np.asarray(eph.error_code)
+    bad = np.flatnonzero(code != 0)
     if bad.size:
         raise ValueError(
             f"SGP4 failed for NORAD {tle.norad_id} at {bad.size} samples (first: sample "
-            f"{int(bad[0])}, error code {int(np.asarray(code)[bad[0]])}): the TLE is stale or "
-            "decayed for these dates"
+            f"{int(bad[0])}, error code {int(code[bad[0]])}): the TLE is stale or decayed for "
+            "these dates"
         )
-    return np.asarray(r, dtype=np.float64), np.asarray(v, dtype=np.float64)
-
-
-def kinematics(tle: TleSet, attitude: AttitudeProfile, t_utc_s: npt.ArrayLike) -> Kinematics:
-    """Orbit and attitude at the given times (SGP4 → TEME → ITRS and GCRS)."""
-    t = np.asarray(t_utc_s, dtype=np.float64)
-    r_teme, v_teme = _propagate_teme(tle, t)
-    m_teme_to_itrs = frames.teme_to_itrs_matrix(t)
-    m_gcrs_to_itrs = frames.gcrs_to_itrs_matrix(t)
-    # TEME → GCRS is the (slow) precession-nutation-equinox rotation; Earth rotation cancels.
-    m_teme_to_gcrs = np.einsum("nji,njk->nik", m_gcrs_to_itrs, m_teme_to_itrs)
-    r_itrs = np.einsum("nij,nj->ni", m_teme_to_itrs, r_teme)
-    r_gcrs = np.einsum("nij,nj->ni", m_teme_to_gcrs, r_teme)
-    v_gcrs = np.einsum("nij,nj->ni", m_teme_to_gcrs, v_teme)
+    r_gcrs = frames.teme_to_gcrs(eph.r_teme_km, t)
+    v_gcrs = frames.teme_to_gcrs(eph.v_teme_km_s, t)
     q = attitude.q_wxyz(t, r_gcrs, v_gcrs)
-    return Kinematics(t, r_itrs, r_gcrs, v_gcrs, q)
+    return Kinematics(t, np.asarray(eph.r_itrs_km, dtype=np.float64), r_gcrs, v_gcrs, q)
 
 
 # --- housekeeping --------------------------------------------------------------------------------
