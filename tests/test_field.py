@@ -144,3 +144,22 @@ def test_mjd2000_origin() -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         assert chaosmagpy.data_utils.mjd2000(2016, 1, 1) == utc_s_to_mjd2000(1_451_606_400.0)
+
+
+@pytest.mark.parametrize("name", ["IGRF-14", "CHAOS-8.1", "MF7"])
+def test_numba_and_numpy_backends_agree(name: str) -> None:
+    """The compiled kernel and the numpy recursion are two implementations of one algorithm."""
+    from orbitcal.field._kernel import HAVE_NUMBA
+
+    assert HAVE_NUMBA, "numba is a dependency of orbitcal (pyproject.toml)"
+    rng = np.random.default_rng(17)
+    model = get_field(name)
+    start, end = (max(v, 0.0) for v in model.valid_mjd2000) if not model.static else (0.0, 9000.0)
+    end = min(end, 9300.0)
+    n = 300 if name != "MF7" else 60
+    t = rng.uniform(start, end, n) * 86400.0 + 946_684_800.0
+    r, colat, lon = _points(rng, n)
+    colat[:2] = [0.0, 180.0]
+    a = model.evaluate(t, r, colat, lon, backend="numba")
+    b = model.evaluate(t, r, colat, lon, backend="numpy")
+    assert np.abs(a - b).max() < 1e-6

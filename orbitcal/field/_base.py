@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import datetime as _dt
+import os
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
 
+from orbitcal.field._kernel import HAVE_NUMBA, synth_pp_nec_nt
 from orbitcal.field.synthesis import n_block_coeffs, synth_internal_nec_nt, to_degree_blocks
 
 __all__ = [
@@ -51,6 +53,18 @@ def _broadcast_samples(
     )
     t, r, c, lo = (np.ascontiguousarray(a).reshape(-1) for a in arrays)
     return t, r, c, lo
+
+
+def _use_numba(backend: str) -> bool:
+    if backend == "numpy":
+        return False
+    if backend == "numba":
+        if not HAVE_NUMBA:
+            raise ValueError("backend 'numba' requested but numba is not installed")
+        return True
+    if backend != "auto":
+        raise ValueError(f"unknown backend {backend!r}; use 'auto', 'numba' or 'numpy'")
+    return HAVE_NUMBA and os.environ.get("ORBITCAL_FIELD_BACKEND", "").lower() != "numpy"
 
 
 class FieldRangeError(ValueError):
@@ -209,15 +223,47 @@ class SphericalHarmonicModel:
         lon_deg: FloatArray,
     ) -> FloatArray:
         """Field at each sample's own time and position, NEC [nT] (see :class:`FieldModel`)."""
+        return self.evaluate(t_utc_s, radius_km, colat_deg, lon_deg)
+
+    def evaluate(
+        self,
+        t_utc_s: FloatArray,
+        radius_km: FloatArray,
+        colat_deg: FloatArray,
+        lon_deg: FloatArray,
+        *,
+        backend: str = "auto",
+    ) -> FloatArray:
+        """:meth:`b_nec_nt` with a choice of implementation.
+
+        Parameters
+        ----------
+        backend : {"auto", "numba", "numpy"}, keyword-only
+            ``"numba"``: the compiled per-sample kernel (:mod:`orbitcal.field._kernel`);
+            ``"numpy"``: the chunked vectorised recursion (:mod:`orbitcal.field.synthesis`);
+            ``"auto"``: numba when installed, unless the environment variable
+            ``ORBITCAL_FIELD_BACKEND`` says ``numpy``.
+        """
         t_utc_s, radius_km, colat_deg, lon_deg = _broadcast_samples(
             t_utc_s, radius_km, colat_deg, lon_deg
         )
         mjd = self.check_range(t_utc_s)
+        idx, dt = self._piece_and_offset(mjd)
+        if _use_numba(backend):
+            return synth_pp_nec_nt(
+                self._pp_blocks,
+                idx.astype(np.int64, copy=False),
+                dt,
+                radius_km,
+                np.radians(colat_deg),
+                np.radians(lon_deg),
+                nmin=self.nmin,
+                nmax=self.nmax,
+            )
         if self.order == 1 and self._pp_blocks.shape[1] == 1:
             return synth_internal_nec_nt(
                 self._pp_blocks[0, 0], radius_km, colat_deg, lon_deg, nmax=self.nmax, nmin=self.nmin
             )
-        idx, dt = self._piece_and_offset(mjd)
 
         def provider(start: int, stop: int) -> FloatArray:
             return self._coeffs_blocks_t(idx[start:stop], dt[start:stop])

@@ -1,0 +1,183 @@
+"""Compiled (Numba) per-sample synthesis kernel: the fast path of :mod:`orbitcal.field.synthesis`.
+
+One loop over samples; for each, the Gauss coefficients are evaluated from the model's piecewise
+polynomial at the sample's own time (Horner), and the Schmidt semi-normalised Legendre functions
+come from the same three-term recursion as the numpy path (Langel 1987, eqs. 4.7–4.9). No array
+grows with the number of samples except the output. ``HAVE_NUMBA`` is False when Numba cannot be
+imported; the numpy path is then used.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["HAVE_NUMBA", "synth_pp_nec_nt"]
+
+try:  # pragma: no cover - exercised by whichever branch is installed
+    import numba
+
+    HAVE_NUMBA = True
+except ImportError:  # pragma: no cover
+    numba = None  # type: ignore[assignment]
+    HAVE_NUMBA = False
+
+_EARTH_REFERENCE_RADIUS_KM = 6371.2  # same constant as orbitcal.field.synthesis
+_POLE_EPS_RAD = 1e-9
+
+
+def _kernel(
+    pp: NDArray[np.float64],
+    piece: NDArray[np.int64],
+    dt: NDArray[np.float64],
+    radius_km: NDArray[np.float64],
+    colat_rad: NDArray[np.float64],
+    lon_rad: NDArray[np.float64],
+    nmin: int,
+    nmax: int,
+    out: NDArray[np.float64],
+) -> None:
+    order = pp.shape[0]
+    n_pts = radius_km.shape[0]
+    # recursion constants
+    width = nmax + 2
+    a_c = np.zeros((nmax + 1, width))
+    b_c = np.zeros((nmax + 1, width))
+    d_c = np.ones(nmax + 1)
+    for n in range(1, nmax + 1):
+        for m in range(n):
+            den = math.sqrt(n * n - m * m)
+            a_c[n, m] = (2 * n - 1) / den
+            if (n - 1) * (n - 1) > m * m:
+                b_c[n, m] = math.sqrt((n - 1) * (n - 1) - m * m) / den
+        if n >= 2:
+            d_c[n] = math.sqrt((2 * n - 1) / (2 * n))
+    p0 = np.zeros(width)
+    p1 = np.zeros(width)
+    p2 = np.zeros(width)
+    q0 = np.zeros(width)
+    q1 = np.zeros(width)
+    q2 = np.zeros(width)
+    cosm = np.zeros(nmax + 1)
+    sinm = np.zeros(nmax + 1)
+    coef = np.zeros(pp.shape[2])
+    for i in range(n_pts):
+        j = piece[i]
+        d = dt[i]
+        for k in range(coef.shape[0]):
+            c = pp[0, j, k]
+            for o in range(1, order):
+                c = c * d + pp[o, j, k]
+            coef[k] = c
+        theta = min(max(colat_rad[i], _POLE_EPS_RAD), math.pi - _POLE_EPS_RAD)
+        x = math.cos(theta)
+        s = math.sin(theta)
+        cp = math.cos(lon_rad[i])
+        sp = math.sin(lon_rad[i])
+        cosm[0] = 1.0
+        sinm[0] = 0.0
+        for m in range(1, nmax + 1):
+            cosm[m] = cosm[m - 1] * cp - sinm[m - 1] * sp
+            sinm[m] = sinm[m - 1] * cp + cosm[m - 1] * sp
+        ar = _EARTH_REFERENCE_RADIUS_KM / radius_km[i]
+        rr = ar * ar
+        # level n-1 in p1/q1, level n-2 in p2/q2 (zero beyond their last order)
+        for m in range(width):
+            p1[m] = 0.0
+            q1[m] = 0.0
+            p2[m] = 0.0
+            q2[m] = 0.0
+        p1[0] = 1.0
+        b_r = 0.0
+        b_t = 0.0
+        b_p = 0.0
+        off = 0
+        for n in range(1, nmax + 1):
+            for m in range(n):
+                p0[m] = a_c[n, m] * x * p1[m] - b_c[n, m] * p2[m]
+                q0[m] = a_c[n, m] * (x * q1[m] - s * p1[m]) - b_c[n, m] * q2[m]
+            p0[n] = d_c[n] * s * p1[n - 1]
+            q0[n] = d_c[n] * (s * q1[n - 1] + x * p1[n - 1])
+            p0[n + 1] = 0.0
+            q0[n + 1] = 0.0
+            rr *= ar
+            if n >= nmin:
+                sr = 0.0
+                st = 0.0
+                sph = 0.0
+                for m in range(n + 1):
+                    g = coef[off + m]
+                    h = coef[off + n + 1 + m]
+                    t1 = g * cosm[m] + h * sinm[m]
+                    t2 = m * (h * cosm[m] - g * sinm[m])
+                    sr += p0[m] * t1
+                    st += q0[m] * t1
+                    sph += p0[m] * t2
+                b_r += (n + 1) * rr * sr
+                b_t -= rr * st
+                b_p -= rr * sph
+            off += 2 * (n + 1)
+            for m in range(n + 2):
+                p2[m] = p1[m]
+                q2[m] = q1[m]
+                p1[m] = p0[m]
+                q1[m] = q0[m]
+        out[i, 0] += -b_t
+        out[i, 1] += b_p / s
+        out[i, 2] += -b_r
+
+
+_compiled: Any = None
+if HAVE_NUMBA:
+    _compiled = numba.njit(cache=True, nogil=True)(_kernel)
+
+
+def synth_pp_nec_nt(
+    pp_blocks: NDArray[np.float64],
+    piece: NDArray[np.int64],
+    dt_days: NDArray[np.float64],
+    radius_km: NDArray[np.float64],
+    colat_rad: NDArray[np.float64],
+    lon_rad: NDArray[np.float64],
+    *,
+    nmin: int,
+    nmax: int,
+) -> NDArray[np.float64]:
+    """Field of a piecewise-polynomial model, each sample at its own time (compiled).
+
+    Parameters
+    ----------
+    pp_blocks : ndarray, shape (order, P, K)
+        Polynomial coefficients per piece in degree blocks, highest power first [nT day^-k].
+    piece : ndarray of int64, shape (N,)
+        Piece of each sample.
+    dt_days : ndarray, shape (N,)
+        Time since the start of that piece [day].
+    radius_km, colat_rad, lon_rad : ndarray, shape (N,)
+        Geocentric radius [km], colatitude [rad], longitude [rad].
+    nmin, nmax : int
+        Degree range.
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+        Geocentric North, East, Centre [nT].
+    """
+    if _compiled is None:  # pragma: no cover
+        raise RuntimeError("numba is not installed")
+    out = np.zeros((radius_km.shape[0], 3))
+    _compiled(
+        np.ascontiguousarray(pp_blocks, dtype=np.float64),
+        np.ascontiguousarray(piece, dtype=np.int64),
+        np.ascontiguousarray(dt_days, dtype=np.float64),
+        np.ascontiguousarray(radius_km, dtype=np.float64),
+        np.ascontiguousarray(colat_rad, dtype=np.float64),
+        np.ascontiguousarray(lon_rad, dtype=np.float64),
+        int(nmin),
+        int(nmax),
+        out,
+    )
+    return out
