@@ -352,6 +352,17 @@ class Orbit:
         }
         for key, value in defaults.items():
             texts.setdefault(key, value)
+        for key, allowed in (("REF_FRAME", "TEME"), ("TIME_SYSTEM", "UTC")):
+            if texts.get(key, allowed).strip().upper() != allowed:
+                raise OMMError(f"OMM {key} is {texts[key]!r}; SGP4 elements need {allowed}")
+        theory = texts.get("MEAN_ELEMENT_THEORY", "SGP4").strip().upper()
+        if theory not in ("SGP4", "SGP/SGP4"):
+            raise OMMError(f"OMM MEAN_ELEMENT_THEORY is {theory!r}; orbitcal propagates SGP4 only")
+        epoch = texts.get("EPOCH", "").strip().rstrip("Zz")
+        if epoch and "." not in epoch:
+            epoch += ".0"
+        if epoch:
+            texts["EPOCH"] = epoch
         satrec = Satrec()
         try:
             omm.initialize(satrec, texts)

@@ -176,6 +176,11 @@ def test_omm_matches_tle() -> None:
     del bad["MEAN_MOTION"]
     with pytest.raises(OMMError, match="MEAN_MOTION"):
         Orbit.from_omm(bad)
+    with pytest.raises(OMMError, match="REF_FRAME"):
+        Orbit.from_omm({**fields, "REF_FRAME": "GCRF"})
+    # Epoch written with a Z and without fractional seconds (as some providers do).
+    whole = {**fields, "EPOCH": "2023-08-13T13:04:13Z"}
+    assert Orbit.from_omm(whole).epoch_utc_s == pytest.approx(1_691_931_853.0, abs=1e-5)
 
 
 def test_propagate_many_equals_one_by_one() -> None:
