@@ -305,3 +305,13 @@ def test_frame_to_body_import_is_the_contract_convention() -> None:
     np.testing.assert_allclose(
         frame_to_body(v, q), Rotation.from_quat(q[:, [1, 2, 3, 0]]).inv().apply(v), atol=1e-15
     )
+
+
+@pytest.mark.parametrize("name", sorted(CONTRACT_EFFECTS))
+def test_scaled_effects_scale_their_disturbance(state: WorldState, name: str) -> None:
+    base = make_effect(name)
+    db1 = base.inject(state, np.random.default_rng(1)).db_body_nt
+    db3 = base.scaled(3.0).inject(state, np.random.default_rng(1)).db_body_nt
+    ratio = _rms(db3) / _rms(db1)
+    # linear effects scale exactly; time_offset, orbit_error, attitude_error to first order
+    assert ratio == pytest.approx(3.0, rel=0.01), name

@@ -119,6 +119,23 @@ class Effect:
     """Base class: a named disturbance with parameters (dataclass fields)."""
 
     name: ClassVar[str] = ""
+    #: Parameters proportional to the disturbance's size (multiplied by :meth:`scaled`).
+    magnitude_params: ClassVar[tuple[str, ...]] = ()
+
+    def scaled(self, factor: float) -> Effect:
+        """The same effect with its magnitude parameters multiplied by ``factor``.
+
+        E.g. ``make_effect("time_offset").scaled(4)`` is a 2 s offset; the blind benchmark uses
+        it to inject each effect at several magnitudes.
+        """
+        changes: dict[str, Any] = {}
+        for key in self.magnitude_params:
+            value = getattr(self, key)
+            if isinstance(value, tuple):
+                changes[key] = tuple(float(x) * factor for x in value)
+            elif value is not None:
+                changes[key] = float(value) * factor
+        return dataclasses.replace(self, **changes)
 
     @property
     def params(self) -> dict[str, Any]:
@@ -142,6 +159,7 @@ class TemperatureEffect(Effect):
     """
 
     name: ClassVar[str] = "temperature"
+    magnitude_params: ClassVar[tuple[str, ...]] = ("bias_nt_per_c", "scale_per_c")
     bias_nt_per_c: tuple[float, ...] = (2.0, -1.5, 2.5)
     scale_per_c: tuple[float, ...] = (3.0e-5, -2.0e-5, 2.5e-5)
     t_ref_c: float = 20.0
@@ -162,6 +180,7 @@ class MagnetorquerEffect(Effect):
     """
 
     name: ClassVar[str] = "magnetorquer"
+    magnitude_params: ClassVar[tuple[str, ...]] = ("coupling_nt_per_am2",)
     coupling_nt_per_am2: tuple[float, ...] = (12.0, 2.0, -1.0, 1.5, -9.0, 3.0, -2.0, 1.0, 15.0)
 
     def inject(self, state: WorldState, rng: np.random.Generator) -> Injection:
@@ -177,6 +196,7 @@ class TimeOffsetEffect(Effect):
     """
 
     name: ClassVar[str] = "time_offset"
+    magnitude_params: ClassVar[tuple[str, ...]] = ("offset_s",)
     offset_s: float = 0.5
 
     def inject(self, state: WorldState, rng: np.random.Generator) -> Injection:
@@ -195,6 +215,7 @@ class ExternalFieldEffect(Effect):
     """
 
     name: ClassVar[str] = "external_field"
+    magnitude_params: ClassVar[tuple[str, ...]] = ("scale",)
     amplitude_nt: float = -50.0
     recovery_time_s: float | None = None
     model: str = "dipole"
@@ -224,6 +245,7 @@ class CrustalFieldEffect(Effect):
     ``CHAOS-8.1-static``), static in Earth-fixed coordinates, times ``scale``."""
 
     name: ClassVar[str] = "crustal_field"
+    magnitude_params: ClassVar[tuple[str, ...]] = ("scale",)
     model: str = "MF7"
     scale: float = 1.0
 
@@ -245,6 +267,7 @@ class SunDrivenEffect(Effect):
     """
 
     name: ClassVar[str] = "sun_driven"
+    magnitude_params: ClassVar[tuple[str, ...]] = ("pattern_nt",)
     pattern_nt: tuple[float, ...] = (8.0, -3.0, 2.0, 4.0, 10.0, -5.0, -2.0, 6.0, 12.0)
 
     def inject(self, state: WorldState, rng: np.random.Generator) -> Injection:
@@ -258,6 +281,7 @@ class NonlinearityEffect(Effect):
     """Cubic non-linearity of each axis: ``dB_i = k_i B_i³`` (plus optional quadratic)."""
 
     name: ClassVar[str] = "nonlinearity"
+    magnitude_params: ClassVar[tuple[str, ...]] = ("cubic_per_nt2", "quadratic_per_nt")
     cubic_per_nt2: tuple[float, ...] = (1.0e-12, -0.8e-12, 1.2e-12)
     quadratic_per_nt: tuple[float, ...] = (0.0, 0.0, 0.0)
 
@@ -279,6 +303,7 @@ class OrbitErrorEffect(Effect):
     """
 
     name: ClassVar[str] = "orbit_error"
+    magnitude_params: ClassVar[tuple[str, ...]] = ("along_track_km",)
     along_track_km: float = 1.0
     true_tle: str | None = None
 
@@ -317,6 +342,7 @@ class ParameterDriftEffect(Effect):
     """
 
     name: ClassVar[str] = "parameter_drift"
+    magnitude_params: ClassVar[tuple[str, ...]] = ("step_nt", "trend_nt_per_day", "scale_step")
     step_nt: tuple[float, ...] = (15.0, -10.0, 8.0)
     trend_nt_per_day: tuple[float, ...] = (3.0, -2.0, 1.5)
     scale_step: tuple[float, ...] = (0.0, 0.0, 0.0)
@@ -348,6 +374,7 @@ class FieldAlignedCurrentsEffect(Effect):
     """
 
     name: ClassVar[str] = "field_aligned_currents"
+    magnitude_params: ClassVar[tuple[str, ...]] = ("amplitude_nt",)
     amplitude_nt: float = 300.0
     center_mlat_deg: float = 68.0
     width_deg: float = 2.5
@@ -390,6 +417,7 @@ class AttitudeErrorEffect(Effect):
     """
 
     name: ClassVar[str] = "attitude_error"
+    magnitude_params: ClassVar[tuple[str, ...]] = ("amplitude_deg", "bias_deg")
     amplitude_deg: float = 0.05
     period_s: float = 5400.0
     bias_deg: tuple[float, ...] = (0.0, 0.0, 0.0)
