@@ -34,6 +34,7 @@ def make_celery(settings: Settings) -> Celery:
         task_reject_on_worker_lost=True,
         worker_prefetch_multiplier=1,
         task_ignore_result=True,
+        task_default_queue=settings.queue,
         broker_connection_retry_on_startup=True,
         worker_hijack_root_logger=False,
         broker_transport_options={"visibility_timeout": int(settings.lock_timeout_s)},
@@ -52,10 +53,11 @@ class CeleryRunner:
 
     def __init__(self, settings: Settings) -> None:
         self.app = make_celery(settings)
+        self.queue = settings.queue
 
     def submit(self, job_id: str) -> None:
         try:
-            self.app.send_task(TASK_NAME, args=[job_id], retry=False)
+            self.app.send_task(TASK_NAME, args=[job_id], queue=self.queue, retry=False)
         except Exception:  # broker unavailable: the job is durable in the database
             import logging
 

@@ -81,15 +81,36 @@ def code_version() -> str:
 
 def create_job(
     engine: Engine,
+    settings: Settings,
     spacecraft_pk: int,
     *,
     trigger: str,
-    params: dict[str, Any],
-    stale_after_s: float,
+    overrides: dict[str, Any] | None = None,
 ) -> tuple[str, bool]:
-    """Create a retraining job unless one is already queued or running: ``(job_id, created)``."""
+    """Create a retraining job unless one is already queued or running: ``(job_id, created)``.
+
+    The job's parameters (method, field, window, hold-out share, seed) are resolved here, from
+    ``overrides``, the spacecraft's schedule and the settings, and stored with the job, so that
+    whichever process runs it (thread or Celery worker) fits exactly what was asked.
+    """
     now = time.time()
+    stale_after_s = settings.lock_timeout_s
     with write_tx(engine) as conn:
+        schedule = (
+            conn.execute(
+                sa.select(Spacecraft.schedule).where(Spacecraft.pk == spacecraft_pk)
+            ).scalar_one_or_none()
+            or {}
+        )
+        params: dict[str, Any] = {
+            "method": settings.method,
+            "field": settings.reference_field,
+            "window_s": float(schedule.get("window_s") or settings.window_s),
+            "holdout_fraction": settings.holdout_fraction,
+            "min_samples": settings.min_samples,
+            "seed": 0,
+            **(overrides or {}),
+        }
         existing = conn.execute(
             sa.select(Job.id)
             .where(
@@ -169,11 +190,11 @@ def _retrain(
     engine: Engine, settings: Settings, job: Any, sc: Any, fit: FitFunction
 ) -> dict[str, Any]:
     params = dict(job.params)
-    schedule = dict(sc.schedule or {})
-    window_s = float(params.get("window_s") or schedule.get("window_s") or settings.window_s)
-    method = str(params.get("method", settings.method))
-    field = str(params.get("field", settings.reference_field))
+    window_s = float(params.get("window_s") or settings.window_s)
+    method = str(params.get("method") or settings.method)
+    field = str(params.get("field") or settings.reference_field)
     holdout_fraction = float(params.get("holdout_fraction", settings.holdout_fraction))
+    min_samples = int(params.get("min_samples", settings.min_samples))
     with read_tx(engine) as conn:
         latest_us = conn.execute(
             sa.text("SELECT MAX(t_utc_us) FROM samples WHERE spacecraft_pk = :pk"),
@@ -189,10 +210,10 @@ def _retrain(
             )
         ).first()
     n = len(samples)
-    if n < settings.min_samples:
+    if n < min_samples:
         raise ValueError(
             f"only {n} samples in the {window_s:g} s window ending {utc_s_to_iso([latest_s])[0]}; "
-            f"a retraining needs at least {settings.min_samples}"
+            f"a retraining needs at least {min_samples}"
         )
     telemetry = samples_to_telemetry(samples)
     orbit = science.load_orbit(sc.tle, sc.omm)

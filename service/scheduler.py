@@ -62,13 +62,7 @@ class FleetScheduler:
         submitted: list[str] = []
         try:
             for pk in due_spacecraft(self.engine, self.settings, now=now):
-                job_id, created = create_job(
-                    self.engine,
-                    pk,
-                    trigger="schedule",
-                    params={},
-                    stale_after_s=self.settings.lock_timeout_s,
-                )
+                job_id, created = create_job(self.engine, self.settings, pk, trigger="schedule")
                 if created:
                     self.runner.submit(job_id)
                     submitted.append(job_id)

@@ -53,6 +53,8 @@ class Settings(BaseSettings):
     #: Whether this process runs the scheduler (exactly one per deployment).
     scheduler: bool = True
     broker_url: str = "redis://127.0.0.1:6379/0"
+    #: Celery queue the jobs go to (one per deployment sharing a broker).
+    queue: str = "orbitcal"
     #: Worker threads for the inline job backend.
     inline_workers: int = 1
 

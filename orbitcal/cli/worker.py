@@ -81,6 +81,7 @@ def run(args: argparse.Namespace) -> int:
             "--loglevel=INFO",
             "--without-gossip",
             "--without-mingle",
+            f"--queues={settings.queue}",
             "--pool=prefork" if args.concurrency > 1 else "--pool=solo",
         ]
     )

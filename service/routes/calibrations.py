@@ -47,9 +47,7 @@ def retrain_now(
     with read_tx(engine) as conn:
         sc = get_spacecraft(conn, spacecraft_id)
     params = {} if body is None else body.model_dump(exclude_none=True)
-    job_id, created = create_job(
-        engine, sc.pk, trigger="api", params=params, stale_after_s=settings.lock_timeout_s
-    )
+    job_id, created = create_job(engine, settings, sc.pk, trigger="api", overrides=params)
     if created:
         request.app.state.runner.submit(job_id)
     return JobAccepted(job_id=job_id)

@@ -1,0 +1,188 @@
+"""The same end-to-end path on PostgreSQL with Celery workers (Redis and RabbitMQ brokers).
+
+Marked ``services``: needs PostgreSQL, Redis and RabbitMQ on 127.0.0.1 (CI fails if absent).
+Each run uses its own PostgreSQL schema and its own Celery queue.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import subprocess
+import sys
+import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest_services import require_service
+from service_helpers import ADMIN_KEY, live_server, pg_schema_url, wait_job, wait_versions
+from service_worlds import SENSOR_A, SENSOR_B, SWARM_A_TLE, T0_UTC_S, world
+
+from orbitcal import ccsds
+from service import science
+from service.settings import Settings
+from service.storage import insert_samples, make_engine, upgrade, write_tx
+
+pytestmark = pytest.mark.services
+
+BROKERS = {
+    "redis": ("Redis", 6379, "redis://127.0.0.1:6379/0"),
+    "rabbitmq": ("RabbitMQ", 5672, "amqp://guest:guest@127.0.0.1:5672//"),
+}
+
+
+@contextmanager
+def celery_worker(
+    database_url: str, broker_url: str, queue: str
+) -> Iterator[subprocess.Popen[bytes]]:
+    env = {
+        **os.environ,
+        "ORBITCAL_DATABASE_URL": database_url,
+        "ORBITCAL_BROKER_URL": broker_url,
+        "ORBITCAL_QUEUE": queue,
+        "ORBITCAL_LOG_LEVEL": "WARNING",
+    }
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "orbitcal", "worker", "--concurrency", "1"],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+    )
+    try:
+        yield proc
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout=10)
+
+
+@pytest.mark.parametrize("broker", sorted(BROKERS))
+def test_end_to_end_on_postgresql_with_celery(broker: str, tmp_path: Path) -> None:
+    name, port, broker_url = BROKERS[broker]
+    require_service("PostgreSQL", 5432)
+    require_service(name, port)
+    queue = "orbitcal-test-" + uuid.uuid4().hex[:8]
+    with pg_schema_url() as url:
+        settings = Settings(
+            database_url=url,
+            admin_key=ADMIN_KEY,
+            job_backend="celery",
+            broker_url=broker_url,
+            queue=queue,
+            scheduler=True,
+            scheduler_tick_s=0.3,
+            cadence_s=0.5,
+            min_new_samples=2000,
+            window_s=43200.0,
+            log_level="WARNING",
+        )
+        with (
+            live_server(settings) as server,
+            celery_worker(url, broker_url, queue) as worker,
+            server.client() as c,
+        ):
+            assert (
+                c.post("/v1/spacecraft", json={"id": "swarm-a", "tle": SWARM_A_TLE}).status_code
+                == 201
+            )
+            df, _ = world(T0_UTC_S, 4320, positions=False, seed=3)
+            # every format, CCSDS included
+            parts = np.array_split(np.arange(len(df)), 5)
+            bodies = []
+            for fmt, idx in zip(("csv", "ndjson", "json", "parquet", "ccsds"), parts, strict=True):
+                part = df.iloc[idx]
+                if fmt == "csv":
+                    bodies.append((part.to_csv(index=False).encode(), "text/csv"))
+                elif fmt == "ndjson":
+                    text = part.to_json(orient="records", lines=True, double_precision=15)
+                    bodies.append((text.encode(), "application/x-ndjson"))
+                elif fmt == "json":
+                    text = part.to_json(orient="records", double_precision=15)
+                    bodies.append((text.encode(), "application/json"))
+                elif fmt == "parquet":
+                    buf = io.BytesIO()
+                    part.to_parquet(buf, index=False)
+                    bodies.append((buf.getvalue(), "application/vnd.apache.parquet"))
+                else:
+                    packets = ccsds.encode_packets(
+                        part["time"].to_numpy(),
+                        part[["b_x", "b_y", "b_z"]].to_numpy(),
+                        q_wxyz=part[["q_w", "q_x", "q_y", "q_z"]].to_numpy(),
+                    )
+                    bodies.append((packets, "application/vnd.ccsds.space-packet"))
+            for body, media in bodies:
+                r = c.post(
+                    "/v1/spacecraft/swarm-a/telemetry",
+                    content=body,
+                    headers={"content-type": media},
+                )
+                assert r.status_code == 200 and not r.json()["rejected"], r.text
+            for body, media in bodies:  # duplicates change nothing
+                r = c.post(
+                    "/v1/spacecraft/swarm-a/telemetry",
+                    content=body,
+                    headers={"content-type": media},
+                )
+                assert r.json()["accepted"] == 0
+            assert c.get("/v1/spacecraft/swarm-a").json()["samples"] == len(df)
+            # the scheduler (in the API) sends the job to the Celery worker
+            v1 = wait_versions(c, "swarm-a", 1, timeout_s=180)[0]
+            job = wait_job(c, v1["job_id"])
+            assert job["status"] == "succeeded" and job["trigger"] == "schedule", job
+            doc = c.get("/v1/spacecraft/swarm-a/calibration").json()
+            held, b_body = world(T0_UTC_S + 86400, 1500, sensor=SENSOR_A, seed=11)
+            rms = np.sqrt(
+                np.mean(
+                    (science.apply_linear(doc, held[["b_x", "b_y", "b_z"]].to_numpy()) - b_body)
+                    ** 2
+                )
+            )
+            assert rms < 2.3, rms  # noise floor: 2 nT per axis
+            # parameter change: the scheduler's next calibration recovers
+            after, _ = world(T0_UTC_S + 43200, 4320, positions=False, sensor=SENSOR_B, seed=4)
+            buf = io.BytesIO()
+            after.to_parquet(buf, index=False)
+            c.post(
+                "/v1/spacecraft/swarm-a/telemetry",
+                content=buf.getvalue(),
+                headers={"content-type": "application/vnd.apache.parquet"},
+            )
+            versions = wait_versions(c, "swarm-a", 2, timeout_s=180)
+            assert wait_job(c, versions[0]["job_id"])["status"] == "succeeded"
+            doc2 = c.get("/v1/spacecraft/swarm-a/calibration").json()
+            held, b_body = world(T0_UTC_S + 86400, 1500, sensor=SENSOR_B, seed=12)
+            rms2 = np.sqrt(
+                np.mean(
+                    (science.apply_linear(doc2, held[["b_x", "b_y", "b_z"]].to_numpy()) - b_body)
+                    ** 2
+                )
+            )
+            assert doc2["version"] == 2 and rms2 < 10.0, rms2
+            assert worker.poll() is None, worker.stderr.read() if worker.stderr else ""
+
+
+def test_bulk_insert_counts_duplicates_on_postgresql() -> None:
+    require_service("PostgreSQL", 5432)
+    with pg_schema_url() as url:
+        engine = make_engine(url)
+        upgrade(engine)
+        upgrade(engine)  # idempotent
+        with write_tx(engine) as conn:
+            conn.exec_driver_sql(
+                "INSERT INTO spacecraft (id, attitude_frame, created_at, sample_count, "
+                "samples_at_last_job) VALUES ('x', 'GCRS', 0, 0, 0)"
+            )
+            rows = [(1, i, 1.0, 2.0, 3.0, *([None] * 11), None) for i in range(100)]
+            assert insert_samples(conn, 1, rows) == 100
+            assert (
+                insert_samples(conn, 1, [*rows[50:], (1, 1000, 0.0, 0.0, 0.0, *([None] * 12))]) == 1
+            )
+            count = conn.exec_driver_sql("SELECT sample_count FROM spacecraft").scalar()
+        assert count == 101
+        engine.dispose()
