@@ -115,6 +115,40 @@ class _MagnitudeProblem:
         v = self.B @ M.T - p[6:9]
         return torch.linalg.vector_norm(v, dim=1) - self.H
 
+    def residuals_and_jacobian(self, p: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Analytic: ``∂r/∂θ = (v/|v|)ᵀ ∂v/∂θ`` with ``v = M B − o``."""
+        M = self.matrix(p)
+        v = self.B @ M.T - p[6:9]
+        norm = torch.linalg.vector_norm(v, dim=1)
+        u = v / norm.unsqueeze(1)
+        B = self.B
+        cols = [u[:, i] * B[:, i] for i in range(3)]  # diagonal entries
+        for i, j in ((0, 1), (0, 2), (1, 2)):
+            if self.kind == "sym":
+                cols.append(u[:, i] * B[:, j] + u[:, j] * B[:, i])
+            else:
+                cols.append(u[:, i] * B[:, j])
+        J = torch.stack([*cols, -u[:, 0], -u[:, 1], -u[:, 2]], dim=1)
+        return norm - self.H, J
+
+
+class _FixedC33:
+    """The upper-triangular problem with ``c33 = 1`` held fixed (seed 001)."""
+
+    def __init__(self, full: _MagnitudeProblem) -> None:
+        self.full = full
+
+    @staticmethod
+    def _expand(q: torch.Tensor) -> torch.Tensor:
+        return torch.cat([q[:2], torch.ones(1, dtype=q.dtype), q[2:]])
+
+    def residuals(self, q: torch.Tensor) -> torch.Tensor:
+        return self.full.residuals(self._expand(q))
+
+    def residuals_and_jacobian(self, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        r, J = self.full.residuals_and_jacobian(self._expand(q))
+        return r, torch.cat([J[:, :2], J[:, 3:]], dim=1)
+
 
 def fit_twostep(data: FitData, *, options: LMOptions | None = None) -> AffineCalibration:
     """TWOSTEP (Alonso & Shuster 2002): linear centred estimate, then Gauss–Newton refinement.
@@ -197,13 +231,10 @@ def fit_flann(
         dtype=torch.float64,
     )
     if fix_c33:
-        full = problem.residuals
-
-        def residuals(q: torch.Tensor) -> torch.Tensor:
-            return full(torch.cat([q[:2], torch.ones(1, dtype=q.dtype), q[2:]]))
-
         res = levenberg_marquardt(
-            residuals, torch.cat([p0[:2], p0[3:]]), options=options or LMOptions(max_epochs=50)
+            _FixedC33(problem),
+            torch.cat([p0[:2], p0[3:]]),
+            options=options or LMOptions(max_epochs=50),
         )
         p = torch.cat([res.params[:2], torch.ones(1, dtype=torch.float64), res.params[2:]])
     else:
