@@ -106,13 +106,23 @@ def quat_multiply(p_wxyz: npt.ArrayLike, q_wxyz: npt.ArrayLike) -> FloatArray:
 
 
 def _rotate(v: FloatArray, q_unit: FloatArray, *, inverse: bool) -> FloatArray:
-    """Rotate ``v`` by ``R(q)`` (or its transpose): ``v + 2w (u × v) + 2 u × (u × v)``."""
-    w = q_unit[..., :1]
-    u = q_unit[..., 1:]
-    if inverse:
-        u = -u
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
+    """Rotate ``v`` by ``R(q)`` (or its transpose): ``v + 2w (u × v) + 2 u × (u × v)``.
+
+    Written per component (no ``np.cross`` temporaries); about as fast as scipy's ``apply``.
+    """
+    w = q_unit[..., 0]
+    sign = -1.0 if inverse else 1.0
+    ux, uy, uz = sign * q_unit[..., 1], sign * q_unit[..., 2], sign * q_unit[..., 3]
+    vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
+    tx = 2.0 * (uy * vz - uz * vy)
+    ty = 2.0 * (uz * vx - ux * vz)
+    tz = 2.0 * (ux * vy - uy * vx)
+    shape = np.broadcast_shapes(v.shape, (*q_unit.shape[:-1], 3))
+    out = np.empty(shape, dtype=np.float64)
+    out[..., 0] = vx + w * tx + (uy * tz - uz * ty)
+    out[..., 1] = vy + w * ty + (uz * tx - ux * tz)
+    out[..., 2] = vz + w * tz + (ux * ty - uy * tx)
+    return out
 
 
 def frame_to_body(v_frame: npt.ArrayLike, q_wxyz: npt.ArrayLike) -> FloatArray:
