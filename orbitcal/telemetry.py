@@ -377,13 +377,19 @@ def _read_csv_bytes(data: bytes) -> pd.DataFrame:
     if not data.strip():
         raise TelemetryError("empty CSV: a header row with at least time,b_x,b_y,b_z is required")
     try:
-        # pandas infers each column: Unix-second times stay numbers, ISO times stay text.
-        return pd.read_csv(
+        # Multi-threaded columnar reader; times kept as text, numbers inferred per column.
+        table = pa_csv.read_csv(
             io.BytesIO(data),
-            skipinitialspace=True,
-            keep_default_na=True,
-            skip_blank_lines=True,
+            convert_options=pa_csv.ConvertOptions(
+                column_types={"time": pa.string()}, strings_can_be_null=True
+            ),
         )
+        return table.to_pandas()
+    except (pa.ArrowException, ValueError):
+        pass  # ragged rows and other irregular files: the tolerant pandas reader below
+    try:
+        # pandas infers each column: Unix-second times stay numbers, ISO times stay text.
+        return pd.read_csv(io.BytesIO(data), skipinitialspace=True, skip_blank_lines=True)
     except (pd.errors.ParserError, UnicodeDecodeError, ValueError) as exc:
         raise TelemetryError(f"not a readable CSV table: {exc}") from None
 
@@ -464,8 +470,9 @@ def _parse_times(series: pd.Series) -> tuple[FloatArray, dict[int, str]]:
     """Time column → seconds in the declared scale; fast pyarrow path for clean ISO strings."""
     if series.dtype.kind not in "iufM":
         try:
-            values: Any = series.astype(object).where(series.notna(), None).to_numpy()
-            arr = pa.array(values, type=pa.string())
+            arr = pa.array(series, from_pandas=True)
+            if not (pa.types.is_string(arr.type) or pa.types.is_large_string(arr.type)):
+                raise TypeError("not a text column")
             ts = pc.cast(arr, pa.timestamp("ns", tz="UTC"))
             if ts.null_count == 0:
                 ns = ts.cast(pa.int64()).to_numpy()
