@@ -55,12 +55,10 @@ def _kernel(
                 b_c[n, m] = math.sqrt((n - 1) * (n - 1) - m * m) / den
         if n >= 2:
             d_c[n] = math.sqrt((2 * n - 1) / (2 * n))
-    p0 = np.zeros(width)
-    p1 = np.zeros(width)
-    p2 = np.zeros(width)
-    q0 = np.zeros(width)
-    q1 = np.zeros(width)
-    q2 = np.zeros(width)
+    # P[n, m] and dP/dθ[n, m] of the current sample, one row per degree (row n has a zero at
+    # m = n + 1 so that the recursion may read P[n-2, m] for m up to n - 1 without a branch).
+    pnm = np.zeros((nmax + 1, width))
+    dpnm = np.zeros((nmax + 1, width))
     cosm = np.zeros(nmax + 1)
     sinm = np.zeros(nmax + 1)
     coef = np.zeros(pp.shape[2])
@@ -84,25 +82,29 @@ def _kernel(
             sinm[m] = sinm[m - 1] * cp + cosm[m - 1] * sp
         ar = _EARTH_REFERENCE_RADIUS_KM / radius_km[i]
         rr = ar * ar
-        # level n-1 in p1/q1, level n-2 in p2/q2 (zero beyond their last order)
-        for m in range(width):
-            p1[m] = 0.0
-            q1[m] = 0.0
-            p2[m] = 0.0
-            q2[m] = 0.0
-        p1[0] = 1.0
+        pnm[0, 0] = 1.0
+        pnm[0, 1] = 0.0
+        dpnm[0, 0] = 0.0
+        dpnm[0, 1] = 0.0
         b_r = 0.0
         b_t = 0.0
         b_p = 0.0
         off = 0
         for n in range(1, nmax + 1):
-            for m in range(n):
-                p0[m] = a_c[n, m] * x * p1[m] - b_c[n, m] * p2[m]
-                q0[m] = a_c[n, m] * (x * q1[m] - s * p1[m]) - b_c[n, m] * q2[m]
-            p0[n] = d_c[n] * s * p1[n - 1]
-            q0[n] = d_c[n] * (s * q1[n - 1] + x * p1[n - 1])
-            p0[n + 1] = 0.0
-            q0[n + 1] = 0.0
+            if n == 1:
+                pnm[1, 0] = x
+                dpnm[1, 0] = -s
+            else:
+                for m in range(n):
+                    pnm[n, m] = a_c[n, m] * x * pnm[n - 1, m] - b_c[n, m] * pnm[n - 2, m]
+                    dpnm[n, m] = (
+                        a_c[n, m] * (x * dpnm[n - 1, m] - s * pnm[n - 1, m])
+                        - b_c[n, m] * dpnm[n - 2, m]
+                    )
+            pnm[n, n] = d_c[n] * s * pnm[n - 1, n - 1]
+            dpnm[n, n] = d_c[n] * (s * dpnm[n - 1, n - 1] + x * pnm[n - 1, n - 1])
+            pnm[n, n + 1] = 0.0
+            dpnm[n, n + 1] = 0.0
             rr *= ar
             if n >= nmin:
                 sr = 0.0
@@ -113,18 +115,13 @@ def _kernel(
                     h = coef[off + n + 1 + m]
                     t1 = g * cosm[m] + h * sinm[m]
                     t2 = m * (h * cosm[m] - g * sinm[m])
-                    sr += p0[m] * t1
-                    st += q0[m] * t1
-                    sph += p0[m] * t2
+                    sr += pnm[n, m] * t1
+                    st += dpnm[n, m] * t1
+                    sph += pnm[n, m] * t2
                 b_r += (n + 1) * rr * sr
                 b_t -= rr * st
                 b_p -= rr * sph
             off += 2 * (n + 1)
-            for m in range(n + 2):
-                p2[m] = p1[m]
-                q2[m] = q1[m]
-                p1[m] = p0[m]
-                q1[m] = q0[m]
         out[i, 0] += -b_t
         out[i, 1] += b_p / s
         out[i, 2] += -b_r
@@ -132,7 +129,10 @@ def _kernel(
 
 _compiled: Any = None
 if HAVE_NUMBA:
-    _compiled = numba.njit(cache=True, nogil=True)(_kernel)
+    # fastmath without "nnan"/"ninf": reassociation lets the order sums vectorise; inputs stay IEEE.
+    _compiled = numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract", "nsz", "arcp"})(
+        _kernel
+    )
 
 
 def synth_pp_nec_nt(
