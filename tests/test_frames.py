@@ -8,6 +8,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from skyfield.api import wgs84
 from skyfield.framelib import itrs
 from skyfield.sgp4lib import TEME, TEME_to_ITRF
@@ -214,3 +216,17 @@ def test_shape_errors() -> None:
     with pytest.raises(ValueError, match="1972"):
         fr.gcrs_to_itrs_matrix([0.0])
     assert fr.gcrs_to_itrs_matrix(np.array([])).shape == (0, 3, 3)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.floats(min_value=-90.0, max_value=90.0),
+    st.floats(min_value=-179.999, max_value=180.0),
+    st.floats(min_value=-5.0, max_value=40_000.0),
+)
+def test_geodetic_round_trip_property(lat: float, lon: float, h_km: float) -> None:
+    lat2, lon2, h2 = fr.itrs_to_geodetic(fr.geodetic_to_itrs(lat, lon, h_km))
+    assert abs(float(h2) - h_km) < 1e-8  # 10 µm
+    assert abs(float(lat2) - lat) < 1e-9
+    if abs(lat) < 89.9999:
+        assert abs((float(lon2) - lon + 180.0) % 360.0 - 180.0) < 1e-9

@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from orbitcal import timescales as ts
 
@@ -164,3 +166,14 @@ def test_mjd2000_and_decimal_year_match_chaosmagpy() -> None:
         ts.decimal_year_to_utc_s(ts.utc_s_to_decimal_year(t)), t, atol=1e-5, rtol=0
     )
     assert ts.utc_s_to_decimal_year([T_2017])[0] == 2017.0
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(min_value=-2_208_988_800 * 10**6, max_value=7_258_118_400 * 10**6))
+def test_iso_round_trip_property_1900_2200(t_us: int) -> None:
+    t = t_us / 1e6
+    iso = ts.utc_s_to_iso([t])[0]
+    assert iso == np.datetime_as_string(np.datetime64(t_us, "us"), unit="us") + "Z"
+    back, errors = ts.parse_time_values([iso])
+    assert not errors
+    assert abs(back[0] - t) < 1e-6
