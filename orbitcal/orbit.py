@@ -95,7 +95,7 @@ class Ephemeris:
     error_code : ndarray of int, shape (N,) (or (M, N))
         SGP4 error code per row, 0 = success (meanings: ``sgp4.api.SGP4_ERRORS``).
     t_utc_s : ndarray, shape (N,)
-        The sample times, POSIX seconds of UTC [s].
+        The sample times, POSIX seconds of UTC [s] (empty when a fake propagator omits them).
     """
 
     r_teme_km: FloatArray
@@ -103,7 +103,7 @@ class Ephemeris:
     r_itrs_km: FloatArray
     v_itrs_km_s: FloatArray
     error_code: IntArray
-    t_utc_s: FloatArray
+    t_utc_s: FloatArray = field(default_factory=lambda: np.empty(0))
 
     @property
     def valid(self) -> npt.NDArray[np.bool_]:
