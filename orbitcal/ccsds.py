@@ -105,7 +105,15 @@ def _utc_s_to_tai_unix(t_utc_s: np.ndarray) -> np.ndarray:
     return np.asarray(timescales.utc_to_tai(t_utc_s), dtype=np.float64)
 
 
+def _quiet_ccsdspy(record: logging.LogRecord) -> bool:
+    return record.levelno >= logging.WARNING
+
+
 def _ccsdspy_packet() -> object:
+    # ccsdspy attaches a console handler and logs INFO on import; the library never prints.
+    logger = logging.getLogger("ccsdspy")
+    if _quiet_ccsdspy not in logger.filters:
+        logger.addFilter(_quiet_ccsdspy)
     from ccsdspy import FixedLength, PacketField
 
     fields = [
@@ -204,7 +212,6 @@ def decode_packets(data: bytes, *, apid: int | None = None) -> DecodedPackets:
     else:
         good = b"".join(data[o : o + PACKET_LENGTH] for o in offsets)
     packet = _ccsdspy_packet()
-    logging.getLogger("ccsdspy").setLevel(logging.WARNING)
     cols = packet.load(io.BytesIO(good), include_primary_header=True)  # type: ignore[attr-defined]
     coarse = np.asarray(cols["coarse"], dtype=np.float64)
     fine = np.asarray(cols["fine"], dtype=np.float64)
