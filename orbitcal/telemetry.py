@@ -331,7 +331,7 @@ def parse_telemetry(data: bytes, *, fmt: TelemetryFormat, time_scale: str = "UTC
     _check_time_scale(time_scale)
     pre_errors: dict[int, str] = {}
     if fmt == "csv":
-        df = _read_csv_bytes(data)
+        df, pre_errors = _read_csv_bytes(data)
     elif fmt == "parquet":
         try:
             table = pq.read_table(pa.BufferReader(data))
@@ -373,25 +373,52 @@ def _check_time_scale(time_scale: str) -> None:
         )
 
 
-def _read_csv_bytes(data: bytes) -> pd.DataFrame:
+def _read_csv_arrow(data: bytes, *, use_threads: bool, invalid: list[Any]) -> pa.Table:
+    def on_invalid(row: Any) -> str:
+        invalid.append(row)
+        return "skip"
+
+    return pa_csv.read_csv(
+        io.BytesIO(data),
+        read_options=pa_csv.ReadOptions(use_threads=use_threads),
+        parse_options=pa_csv.ParseOptions(invalid_row_handler=on_invalid),
+        convert_options=pa_csv.ConvertOptions(
+            column_types={"time": pa.string()}, strings_can_be_null=True
+        ),
+    )
+
+
+def _read_csv_bytes(data: bytes) -> tuple[pd.DataFrame, dict[int, str]]:
+    """CSV → frame in data-row order plus reasons for rows with the wrong number of fields."""
     if not data.strip():
         raise TelemetryError("empty CSV: a header row with at least time,b_x,b_y,b_z is required")
+    invalid: list[Any] = []
     try:
         # Multi-threaded columnar reader; times kept as text, numbers inferred per column.
-        table = pa_csv.read_csv(
-            io.BytesIO(data),
-            convert_options=pa_csv.ConvertOptions(
-                column_types={"time": pa.string()}, strings_can_be_null=True
-            ),
-        )
-        return table.to_pandas()
+        table = _read_csv_arrow(data, use_threads=True, invalid=invalid)
+        if not invalid:
+            return table.to_pandas(), {}
+        # Rare: ragged rows. Re-read single-threaded, which numbers them (physical lines).
+        invalid.clear()
+        table = _read_csv_arrow(data, use_threads=False, invalid=invalid)
     except (pa.ArrowException, ValueError):
-        pass  # ragged rows and other irregular files: the tolerant pandas reader below
-    try:
-        # pandas infers each column: Unix-second times stay numbers, ISO times stay text.
-        return pd.read_csv(io.BytesIO(data), skipinitialspace=True, skip_blank_lines=True)
-    except (pd.errors.ParserError, UnicodeDecodeError, ValueError) as exc:
-        raise TelemetryError(f"not a readable CSV table: {exc}") from None
+        try:
+            # pandas infers each column: Unix-second times stay numbers, ISO times stay text.
+            return pd.read_csv(io.BytesIO(data), skipinitialspace=True), {}
+        except (pd.errors.ParserError, UnicodeDecodeError, ValueError) as exc:
+            raise TelemetryError(f"not a readable CSV table: {exc}") from None
+    # pyarrow numbers rows from 1 at the header, skipping blank lines: data row = number − 2.
+    bad: dict[int, str] = {}
+    for row in invalid:
+        if row.number is None:  # pragma: no cover - single-threaded reads number every row
+            raise TelemetryError(f"CSV row with {row.actual_columns} fields: {row.text[:60]!r}")
+        bad[int(row.number) - 2] = (
+            f"row has {row.actual_columns} fields, the header has {row.expected_columns}"
+        )
+    total = table.num_rows + len(bad)
+    df = table.to_pandas()
+    df.index = pd.Index(np.setdiff1d(np.arange(total), np.fromiter(bad, dtype=np.int64)))
+    return df.reindex(pd.RangeIndex(total)), bad
 
 
 def _records_to_frame(records: Sequence[Any]) -> pd.DataFrame:
@@ -625,6 +652,8 @@ def _validate(df: pd.DataFrame, *, time_scale: str, pre_errors: dict[int, str]) 
         mtq_am2=None if mtq is None else np.ascontiguousarray(mtq[idx]),
         hk={k: v[idx] for k, v in hk.items()},
     )
+    for i, why in pre_errors.items():
+        reasons[i] = [why]  # an unreadable row has no other fields worth reporting
     rejected = [RowError(i, "; ".join(reasons[i])) for i in sorted(reasons)]
     return ReadResult(telemetry, rejected)
 

@@ -322,3 +322,20 @@ def test_parse_accepts_a_bytes_stream_of_a_frame_written_by_pandas() -> None:
     df.to_csv(buf, index=False)
     res = parse_telemetry(buf.getvalue().encode(), fmt="csv")
     np.testing.assert_array_equal(res.telemetry.t_utc_s, [T0_UTC_S, T0_UTC_S + 1])
+
+
+def test_ragged_csv_rows_are_rejected_with_their_data_row_number() -> None:
+    csv = (
+        b"time,b_x,b_y,b_z\n"
+        b"2023-01-01T00:00:00Z,1,2,3\n"
+        b"2023-01-01T00:00:01Z,1,2,3,4\n"
+        b"\n"
+        b"2023-01-01T00:00:02Z,1,2\n"
+        b"2023-01-01T00:00:03Z,7,2,3\n"
+    )
+    res = parse_telemetry(csv, fmt="csv")
+    assert _reasons(res) == {
+        1: "row has 5 fields, the header has 4",
+        2: "row has 3 fields, the header has 4",
+    }
+    np.testing.assert_array_equal(res.telemetry.b_raw_nt[:, 0], [1, 7])
