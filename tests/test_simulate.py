@@ -315,3 +315,17 @@ def test_scaled_effects_scale_their_disturbance(state: WorldState, name: str) ->
     ratio = _rms(db3) / _rms(db1)
     # linear effects scale exactly; time_offset, orbit_error, attitude_error to first order
     assert ratio == pytest.approx(3.0, rel=0.01), name
+
+
+def test_external_field_driven_by_the_rc_index(state: WorldState) -> None:
+    db, _ = _inject(state, "external_field", model="RC")
+    # NOTES: quiet-time external field ~10–20 nT at LEO
+    assert 3.0 < _rms(db) < 100.0
+
+
+def test_orbit_error_true_tle_picks_its_spacecraft_from_a_file(
+    state: WorldState, tle_text: str
+) -> None:
+    # the whole file: the Swarm A set nearest the start is the world's own one → zero error
+    db, info = _inject(state, "orbit_error", true_tle=tle_text)
+    assert abs(info["along_track_km_mean"]) < 1e-6 and np.abs(db).max() < 1e-6

@@ -296,8 +296,9 @@ class NonlinearityEffect(Effect):
 class OrbitErrorEffect(Effect):
     """Position error of the operator's orbit: the spacecraft is really elsewhere.
 
-    With ``true_tle`` (text of a later, better element set of the same spacecraft) the true
-    position is propagated from it; otherwise the spacecraft is ``along_track_km`` ahead of its
+    With ``true_tle`` (text holding a later, better element set of the same spacecraft; from a
+    file of many sets the one of this NORAD id nearest the start is used) the true position is
+    propagated from it; otherwise the spacecraft is ``along_track_km`` ahead of its
     TLE position (evaluated at ``t + along_track_km / |v|``). ``dB = R(q) [B(r_true) − B(r_tle)]``
     with the reported (true) attitude. ``info`` records the along-track separation.
     """
@@ -312,9 +313,9 @@ class OrbitErrorEffect(Effect):
         v = state.v_gcrs_km_s
         speed = np.linalg.norm(v, axis=1)
         if self.true_tle:
-            from orbitcal.simulate.world import kinematics, parse_tles
+            from orbitcal.simulate.world import kinematics, select_tle
 
-            true_set = parse_tles(self.true_tle)[0]
+            true_set = select_tle(self.true_tle, norad_id=state.tle.norad_id, at_utc_s=float(t[0]))
             r_true_itrs = kinematics(true_set, state.attitude, t).r_itrs_km
             r_true_gcrs = frames.itrs_to_gcrs(r_true_itrs, t)
         else:
