@@ -296,7 +296,18 @@ def tables(draw: st.DrawFn) -> Telemetry:
         raw[:, 0] += 2.0  # never the zero vector
         q = raw / np.linalg.norm(raw, axis=1, keepdims=True)
     temp = np.array(draw(st.lists(st.floats(-100, 150), min_size=n, max_size=n)))
-    return Telemetry(t_utc_s=t, b_raw_nt=b, q_wxyz=q, temperature_c=temp)
+    r = mtq = None
+    hk = {}
+    if draw(st.booleans()):
+        dirs = np.array(draw(st.lists(st.tuples(finite, finite, finite), min_size=n, max_size=n)))
+        dirs[:, 2] = np.abs(dirs[:, 2]) + 1.0
+        r = dirs / np.linalg.norm(dirs, axis=1, keepdims=True) * draw(st.floats(6500, 50000))
+    if draw(st.booleans()):
+        mtq = np.array(draw(st.lists(st.tuples(finite, finite, finite), min_size=n, max_size=n)))
+        hk["hk_bus_v"] = np.array(draw(st.lists(finite, min_size=n, max_size=n)))
+    return Telemetry(
+        t_utc_s=t, b_raw_nt=b, q_wxyz=q, r_itrs_km=r, temperature_c=temp, mtq_am2=mtq, hk=hk
+    )
 
 
 @pytest.mark.parametrize("fmt", FORMATS)
