@@ -22,6 +22,7 @@ from orbitcal.simulate import (
     kinematics,
     make_effect,
     parse_effect_spec,
+    read_world,
     select_tle,
     simulate_world,
 )
@@ -297,6 +298,10 @@ def test_world_writes_a_directory(tmp_path: Path, tle_text: str) -> None:
     np.testing.assert_array_equal(
         samples["db_magnetorquer_x"], w.injected_body_nt["magnetorquer"][:, 0]
     )
+    back = read_world(tmp_path / "world")
+    assert back.truth == truth and back.tle_text == paths["tle"].read_text()
+    np.testing.assert_array_equal(back.telemetry.mtq_am2, w.telemetry.mtq_am2)
+    np.testing.assert_array_equal(back.samples["b_ref_z"], w.b_ref_body_nt[:, 2])
 
 
 def test_frame_to_body_import_is_the_contract_convention() -> None:

@@ -51,10 +51,12 @@ __all__ = [
     "Kinematics",
     "TleSet",
     "World",
+    "WorldFiles",
     "WorldState",
     "kinematics",
     "orbital_thermal_cycle_c",
     "parse_tles",
+    "read_world",
     "select_tle",
     "simulate_world",
 ]
@@ -465,6 +467,40 @@ class World:
                 samples[f"db_{name}_{axis}"] = db[:, j]
         pd.DataFrame(samples).to_parquet(paths["truth_samples"], index=False)
         return paths
+
+
+@dataclass(frozen=True)
+class WorldFiles:
+    """A world read back from its directory (see :meth:`World.write`)."""
+
+    telemetry: Telemetry
+    tle_text: str
+    truth: dict[str, Any]
+    samples: pd.DataFrame
+
+
+def read_world(directory: str | Path) -> WorldFiles:
+    """Read a world directory written by :meth:`World.write` (telemetry validated as usual).
+
+    Raises
+    ------
+    ValueError
+        When ``truth.json`` is missing or the telemetry has rejected rows (a world never has).
+    """
+    from orbitcal.telemetry import read_telemetry
+
+    root = Path(directory)
+    truth_path = root / "truth.json"
+    if not truth_path.is_file():
+        raise ValueError(f"{root} is not a world directory (no truth.json)")
+    truth = json.loads(truth_path.read_text())
+    files = truth.get("files", {})
+    res = read_telemetry(root / files.get("telemetry", "telemetry.csv"))
+    if res.rejected:
+        raise ValueError(f"{root}: {len(res.rejected)} telemetry rows rejected: {res.rejected[0]}")
+    samples = pd.read_parquet(root / files.get("truth_samples", "truth_samples.parquet"))
+    tle_text = (root / files.get("tle", "spacecraft.tle")).read_text()
+    return WorldFiles(res.telemetry, tle_text, truth, samples)
 
 
 def simulate_world(
