@@ -128,7 +128,7 @@ class RowError(NamedTuple):
     reason: str
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Telemetry:
     """A validated telemetry table (columnar, sorted by time, unique times).
 
