@@ -343,6 +343,21 @@ def run_retrain(
         if job is None:
             log.warning("job not found", extra={"job_id": job_id})
             return "missing"
+        if job.status == "running":
+            # Delivered again while marked running: the process running it died (Celery
+            # redelivers an unacknowledged task only after a worker loss or the visibility
+            # timeout). End it and free the lock; the served calibration was never touched.
+            conn.execute(
+                sa.update(Job)
+                .where(Job.id == job_id)
+                .values(
+                    status="failed",
+                    error="interrupted: the worker running this job was lost (redelivered)",
+                    finished_at=time.time(),
+                )
+            )
+            release_lock(conn, job.spacecraft_pk, job_id)
+            return "failed"
         if job.status != "queued":
             return str(job.status)
         if not acquire_lock(conn, job.spacecraft_pk, job_id, timeout_s=settings.lock_timeout_s):
