@@ -225,3 +225,30 @@ def live_server(settings: Settings, **kwargs: Any) -> Iterator[LiveServer]:
         yield server
     finally:
         server.stop()
+
+
+def physical_csv(t0_s: float, n: int, *, dt_s: float = 10.0, seed: int = 0) -> bytes:
+    """``n`` calibratable samples: IGRF-14 along Swarm A's orbit seen by a tumbling body, through a
+    known sensor (gains ~1, offsets ~100 nT, 2 nT noise), as CSV with quaternions and positions."""
+    from scipy.spatial.transform import Rotation
+
+    from orbitcal.orbit import Orbit
+    from orbitcal.truth import truth_body_nt
+
+    rng = np.random.default_rng(seed)
+    t = t0_s + dt_s * np.arange(n)
+    dt = t - T0_UTC_S
+    eph = Orbit.from_tle(SWARM_A_TLE).propagate(t)
+    r = np.asarray(eph.r_itrs_km)
+    rotvec = np.stack([dt * 2e-3, dt * 1.3e-3 + 0.4, 0.7 + dt * 0.7e-3], axis=-1)
+    xyzw = Rotation.from_rotvec(rotvec).as_quat()
+    q = np.concatenate([xyzw[:, 3:], xyzw[:, :3]], axis=1)
+    b_body = truth_body_nt(t, r, q, attitude_frame="GCRS", field="IGRF-14")
+    M = np.array([[1.02, 0.01, -0.005], [0.0, 0.98, 0.02], [0.0, 0.0, 1.01]])
+    b_raw = b_body @ np.linalg.inv(M).T + np.array([120.0, -80.0, 45.0])
+    b_raw += rng.normal(0.0, 2.0, b_raw.shape)
+    lines = ["time,b_x,b_y,b_z,q_w,q_x,q_y,q_z,r_x,r_y,r_z"]
+    for i in range(n):
+        vals = [*b_raw[i], *q[i], *r[i]]
+        lines.append(f"{t[i]:.6f}," + ",".join(f"{v:.17g}" for v in vals))
+    return ("\n".join(lines) + "\n").encode()
