@@ -130,9 +130,11 @@ def _kernel(
 _compiled: Any = None
 if HAVE_NUMBA:
     # fastmath without "nnan"/"ninf": reassociation lets the order sums vectorise; inputs stay IEEE.
-    _compiled = numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract", "nsz", "arcp"})(
-        _kernel
-    )
+    _FASTMATH = {"reassoc", "contract", "nsz", "arcp"}
+    try:
+        _compiled = numba.njit(cache=True, nogil=True, fastmath=_FASTMATH)(_kernel)
+    except RuntimeError:  # pragma: no cover - no writable cache location (read-only install)
+        _compiled = numba.njit(cache=False, nogil=True, fastmath=_FASTMATH)(_kernel)
 
 
 def synth_pp_nec_nt(
