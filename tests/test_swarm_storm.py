@@ -12,7 +12,9 @@ prediction (``CHAOS-7.mat`` with ChaosMagPy's shipped RC index). Facts pinned he
 - Not reached: the ~15 nT left by VirES's ``B_NEC_CHAOS`` column ([-12, -0.6, -7] nT). VirES's
   CHAOS magnetospheric part is ~34 nT stronger in N than ChaosMagPy's CHAOS-7 external field with
   the RC index ChaosMagPy ships (measured below); neither the CHAOS-7 coefficients nor that RC
-  index reproduce it, so the test records the gap instead of tuning to it.
+  index reproduce it, so the test records the gap instead of tuning to it. (Driving the external
+  part by the total RC instead of its external part RC_e would leave -18 nT, close to VirES; that
+  is not the CHAOS parameterisation, so it is only noted here.)
 """
 
 from __future__ import annotations
