@@ -701,21 +701,25 @@ def _encode_frame(df: pd.DataFrame, fmt: TelemetryFormat) -> bytes:
         else:
             pq.write_table(table, sink)
         return sink.getvalue()
-    columns = {c: df[c].to_numpy() for c in df.columns}
-    records = [{c: _json_value(columns[c][i]) for c in columns} for i in range(len(df))]
+    keys = [str(c) for c in df.columns]
+    # .tolist() gives Python floats/str in C; orjson writes NaN as null.
+    cols = [np.asarray(df[c].to_numpy()).tolist() for c in keys]
+    records = [dict(zip(keys, row, strict=True)) for row in zip(*cols, strict=True)]
+    whole = cast(bytes, orjson.dumps(records))
     if fmt == "json":
-        return cast(bytes, orjson.dumps(records))
-    return b"".join(cast(bytes, orjson.dumps(rec)) + b"\n" for rec in records)
-
-
-def _json_value(v: Any) -> Any:
-    if isinstance(v, np.floating):
-        return float(v)
-    if isinstance(v, np.integer):
-        return int(v)
-    if isinstance(v, np.str_):
-        return str(v)
-    return v
+        return whole
+    if not records:
+        return b""
+    text_cols = [
+        col for c, col in zip(keys, cols, strict=True) if c != "time" and isinstance(col[0], str)
+    ]
+    braces = any("{" in k or "}" in k for k in keys) or any(
+        "{" in v or "}" in v for col in text_cols for v in col if isinstance(v, str)
+    )
+    if braces:
+        return b"".join(cast(bytes, orjson.dumps(rec)) + b"\n" for rec in records)
+    # One C-level dump, split between objects: valid since no key or text value holds a brace.
+    return whole[1:-1].replace(b"},{", b"}\n{") + b"\n"
 
 
 def write_field_csv(path: str | Path, t_utc_s: npt.ArrayLike, b_nt: npt.ArrayLike) -> None:

@@ -350,3 +350,16 @@ def test_ragged_csv_rows_are_rejected_with_their_data_row_number() -> None:
         2: "row has 3 fields, the header has 4",
     }
     np.testing.assert_array_equal(res.telemetry.b_raw_nt[:, 0], [1, 7])
+
+
+def test_ndjson_text_channel_with_braces_round_trips(tmp_path: Path) -> None:
+    tel = Telemetry(
+        t_utc_s=np.array([T0_UTC_S, T0_UTC_S + 1]),
+        b_raw_nt=np.array([[1.0, 2, 3], [4, 5, 6]]),
+        hk={"hk_note": np.array(['{"a": 1},{"b": 2}', "plain"], dtype=object)},
+    )
+    path = tmp_path / "b.ndjson"
+    write_telemetry(path, tel)
+    assert path.read_bytes().count(b"\n") == 2
+    res = read_telemetry(path)
+    assert list(res.telemetry.hk["hk_note"]) == ['{"a": 1},{"b": 2}', "plain"]
