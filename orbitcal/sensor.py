@@ -161,6 +161,15 @@ class SensorModel:
             noise_std_nt=noise_std_nt,
         )
 
+    def with_wang2020_change(self) -> SensorModel:
+        """This sensor after the in-orbit change of Wang 2020: ``A + (A₁₇ − A₁₅)``,
+        ``B_0 + (B₀,₁₇ − B₀,₁₅)`` (diagonal −0.002, bias (−19.5, −15.3, +11.01) nT)."""
+        return SensorModel(
+            a_matrix=self.a_matrix + np.array(WANG2020_ORBIT_A) - np.array(WANG2020_GROUND_A),
+            bias_nt=self.bias_nt + np.array(WANG2020_ORBIT_B0_NT) - np.array(WANG2020_GROUND_B0_NT),
+            noise_std_nt=self.noise_std_nt,
+        )
+
     @classmethod
     def random(
         cls,

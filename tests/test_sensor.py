@@ -78,3 +78,10 @@ def test_random_sensor_is_plausible_and_validated() -> None:
         SensorModel(a_matrix=np.zeros((3, 3)))
     with pytest.raises(ValueError, match="noise"):
         SensorModel(noise_std_nt=-1.0)
+
+
+def test_wang2020_change_applied_to_the_ground_sensor_is_eq17() -> None:
+    changed = SensorModel.from_wang2020_ground().with_wang2020_change()
+    orbit = SensorModel.wang2020_orbit_change()
+    np.testing.assert_allclose(changed.a_matrix, orbit.a_matrix, atol=1e-15)
+    np.testing.assert_allclose(changed.bias_nt, orbit.bias_nt, atol=1e-9)

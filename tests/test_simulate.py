@@ -353,3 +353,20 @@ def test_written_world_reproduces_its_reference_field_through_the_truth_pipeline
     assert truth.b_body_nt is not None
     # CSV carries full-precision floats and µs times (exact at a 10 s cadence)
     np.testing.assert_allclose(truth.b_body_nt, w.b_ref_body_nt, rtol=0, atol=1e-6)
+
+
+def test_sensor_change_in_orbit_wang2020_eq17(tle_text: str) -> None:
+    from orbitcal.sensor import SensorModel
+
+    ground, orbit = SensorModel.from_wang2020_ground(), SensorModel.wang2020_orbit_change()
+    change = START_UTC_S + 900.0
+    w = _world(tle_text, 8, sensor=ground, sensor_after=orbit, sensor_change_utc_s=change)
+    after = w.telemetry.t_utc_s >= change
+    assert 0.4 < after.mean() < 0.6
+    res_before = ground.invert(w.telemetry.b_raw_nt[~after]) - w.b_true_body_nt[~after]
+    res_after = orbit.invert(w.telemetry.b_raw_nt[after]) - w.b_true_body_nt[after]
+    assert res_before.std() < 3.0 and res_after.std() < 3.0  # σ = 2 nT noise only
+    # the ground calibration is wrong after the change by tens of nT
+    stale = ground.invert(w.telemetry.b_raw_nt[after]) - w.b_true_body_nt[after]
+    assert np.abs(stale).max() > 20.0
+    assert w.truth["sensor_after"]["b0_nt"] == [-652.7, 1266.4, -444.49]

@@ -100,3 +100,12 @@ def test_file_with_many_spacecraft_needs_norad(
     del args[i : i + 2]
     assert main(args) == 2
     assert "--norad" in capsys.readouterr().err
+
+
+def test_sensor_change_half_way(tmp_path: Path, authorities: Path) -> None:
+    out = tmp_path / "change"
+    assert main(_args(authorities, out, "--sensor", "wang2020", "--sensor-change-at-s", "600")) == 0
+    truth = json.loads((out / "truth.json").read_text())
+    assert truth["sensor"]["b0_nt"] == [-633.2, 1281.7, -455.5]
+    np.testing.assert_allclose(truth["sensor_after"]["b0_nt"], [-652.7, 1266.4, -444.49])
+    assert truth["sensor_change"] == "2023-07-05T00:10:00.000000Z"

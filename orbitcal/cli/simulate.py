@@ -67,6 +67,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "--noise-std-nt", type=float, default=2.0, metavar="NT", help="sensor noise σ [nT]"
     )
     p.add_argument(
+        "--sensor-change-at-s",
+        type=float,
+        metavar="S",
+        help="from S seconds after the start the sensor changes as in Wang 2020 (eq. 15 → 17)",
+    )
+    p.add_argument(
         "--include-position", action="store_true", help="write r_x,r_y,r_z (ITRS km from the TLE)"
     )
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
@@ -109,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(f"--effect: {exc}") from None
 
     rng = np.random.default_rng(args.seed)
-    sensor: SensorModel | None
+    sensor: SensorModel
     if args.sensor == "wang2020":
         sensor = SensorModel.from_wang2020_ground(noise_std_nt=args.noise_std_nt)
     elif args.sensor == "ideal":
@@ -118,6 +124,13 @@ def run(args: argparse.Namespace) -> int:
         sensor = SensorModel.random(
             rng=np.random.default_rng([args.seed, 1]), noise_std_nt=args.noise_std_nt
         )
+    sensor_after = None
+    change_utc_s = None
+    if args.sensor_change_at_s is not None:
+        if not 0 <= args.sensor_change_at_s <= args.duration_s:
+            raise CliError("--sensor-change-at-s must lie within the simulated span")
+        sensor_after = sensor.with_wang2020_change()
+        change_utc_s = start_utc_s + args.sensor_change_at_s
     try:
         world = simulate_world(
             tle_text,
@@ -128,6 +141,8 @@ def run(args: argparse.Namespace) -> int:
             rng=rng,
             attitude=attitude_profile(args.attitude),
             sensor=sensor,
+            sensor_after=sensor_after,
+            sensor_change_utc_s=change_utc_s,
             effects=effects,
             field=args.field,
             include_position=args.include_position,

@@ -512,6 +512,8 @@ def simulate_world(
     rng: np.random.Generator,
     attitude: AttitudeProfile | None = None,
     sensor: SensorModel | None = None,
+    sensor_after: SensorModel | None = None,
+    sensor_change_utc_s: float | None = None,
     effects: Sequence[Effect] = (),
     field: str = "IGRF-14",
     housekeeping: Housekeeping | None = None,
@@ -536,6 +538,9 @@ def simulate_world(
         Default nadir pointing (LVLH).
     sensor : SensorModel or None
         Default ``SensorModel.random(rng=...)`` (Wang 2020-like spread, σ = 2 nT).
+    sensor_after, sensor_change_utc_s : SensorModel, float, optional
+        A change of the sensor parameters in orbit (Wang 2020 section 5, eq. 17): samples at or
+        after ``sensor_change_utc_s`` [POSIX s] are measured with ``sensor_after``.
     effects : sequence of Effect
         Disturbances to inject (CONTRACT section-5 names).
     field : str
@@ -599,6 +604,13 @@ def simulate_world(
     for db in injected.values():
         b_true += db
     b_raw = sensor.measure(b_true, rng=noise_rng)
+    if (sensor_after is None) != (sensor_change_utc_s is None):
+        raise ValueError("give both sensor_after and sensor_change_utc_s, or neither")
+    if sensor_after is not None and sensor_change_utc_s is not None:
+        after = t >= sensor_change_utc_s
+        noise = b_raw - sensor.measure_noiseless(b_true)
+        scale = sensor_after.noise_std_nt / sensor.noise_std_nt if sensor.noise_std_nt else 0.0
+        b_raw[after] = sensor_after.measure_noiseless(b_true[after]) + scale * noise[after]
 
     temperature = extra_hk.pop("temperature", state.temperature_c)
     mtq = state.mtq_am2
@@ -624,6 +636,15 @@ def simulate_world(
         "reference_field": field,
         "sensor": sensor.to_dict(),
         "linear": sensor.linear,
+        **(
+            {
+                "sensor_after": sensor_after.to_dict(),
+                "linear_after": sensor_after.linear,
+                "sensor_change": utc_s_to_iso([sensor_change_utc_s])[0],
+            }
+            if sensor_after is not None and sensor_change_utc_s is not None
+            else {}
+        ),
         "effects": effect_truth,
         "verdict": effect_truth[0]["name"]
         if len(effect_truth) == 1
