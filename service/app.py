@@ -4,6 +4,7 @@ database (running migrations), the job runner and the scheduler. Nothing happens
 
 from __future__ import annotations
 
+import asyncio
 import logging
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
@@ -102,6 +103,7 @@ def create_app(
 
         def on_done(status: str, seconds: float) -> None:
             metrics.retrain_seconds.labels(status).observe(seconds)
+            app.state.calibration_cache.clear()  # a promotion shows at once in this process
 
         job_runner: JobRunner
         if runner is not None:
@@ -147,6 +149,10 @@ def create_app(
         hash_key(settings.admin_key.get_secret_value()) if settings.admin_key else None
     )
     app.state.diagnosis_cache = {}
+    app.state.key_cache = {}
+    app.state.key_lock = asyncio.Lock()
+    app.state.calibration_cache = {}
+    app.state.calibration_locks = {}
     if not settings.auth:
         log.warning(
             "AUTHENTICATION IS OFF: every caller on %s is admin. Only for local use.",

@@ -13,10 +13,11 @@ import re
 import secrets
 import time
 from dataclasses import dataclass
-from typing import Annotated
+from typing import Annotated, Any
 
 import sqlalchemy as sa
 from fastapi import Depends, Header, HTTPException, Request
+from fastapi.concurrency import run_in_threadpool
 
 from service.storage import ApiKey, hash_key, read_tx, write_tx
 
@@ -82,11 +83,27 @@ def _unauthorised(reason: str) -> HTTPException:
     return HTTPException(status_code=401, detail=reason, headers={"WWW-Authenticate": "X-API-Key"})
 
 
-def principal(
+def _lookup(engine: Any, key_hash: str) -> Principal | None:
+    with read_tx(engine) as conn:
+        row = conn.execute(
+            sa.select(ApiKey.key_hash, ApiKey.name, ApiKey.scopes, ApiKey.revoked).where(
+                ApiKey.key_hash == key_hash
+            )
+        ).first()
+    if row is None or row.revoked or not hmac.compare_digest(row.key_hash, key_hash):
+        return None
+    return Principal(row.name, frozenset(row.scopes))
+
+
+async def principal(
     request: Request,
     x_api_key: Annotated[str | None, Header(description="API key (see docs/service.md)")] = None,
 ) -> Principal:
-    """Resolve the caller from ``X-API-Key`` (dependency)."""
+    """Resolve the caller from ``X-API-Key`` (dependency).
+
+    Lookups are cached for ``key_cache_s`` seconds per key hash (so a revocation takes effect
+    within that time); the bootstrap admin key never touches the database.
+    """
     settings = request.app.state.settings
     if not settings.auth:
         return Principal("anonymous (authentication off)", frozenset({"admin"}))
@@ -96,15 +113,23 @@ def principal(
     admin_hash: str | None = request.app.state.admin_key_hash
     if admin_hash is not None and hmac.compare_digest(presented, admin_hash):
         return Principal("bootstrap admin", frozenset({"admin"}))
-    with read_tx(request.app.state.engine) as conn:
-        row = conn.execute(
-            sa.select(ApiKey.key_hash, ApiKey.name, ApiKey.scopes, ApiKey.revoked).where(
-                ApiKey.key_hash == presented
-            )
-        ).first()
-    if row is None or row.revoked or not hmac.compare_digest(row.key_hash, presented):
+    cache: dict[str, tuple[Principal | None, float]] = request.app.state.key_cache
+    hit = cache.get(presented)
+    if hit is not None and hit[1] > time.monotonic():
+        who = hit[0]
+    else:
+        async with request.app.state.key_lock:  # single flight for concurrent misses
+            hit = cache.get(presented)
+            if hit is not None and hit[1] > time.monotonic():
+                who = hit[0]
+            else:
+                who = await run_in_threadpool(_lookup, request.app.state.engine, presented)
+                if len(cache) > 10_000:
+                    cache.clear()
+                cache[presented] = (who, time.monotonic() + settings.key_cache_s)
+    if who is None:
         raise _unauthorised("unknown or revoked API key")
-    return Principal(row.name, frozenset(row.scopes))
+    return who
 
 
 def require_scope(action: str) -> object:
@@ -120,7 +145,7 @@ def require_scope(action: str) -> object:
     return Depends(dependency)
 
 
-def require_admin(who: Annotated[Principal, Depends(principal)]) -> Principal:
+async def require_admin(who: Annotated[Principal, Depends(principal)]) -> Principal:
     if not who.allows("admin", None):
         raise HTTPException(status_code=403, detail="this key lacks the scope admin")
     return who

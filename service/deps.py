@@ -1,4 +1,8 @@
-"""Shared route dependencies and helpers."""
+"""Shared route dependencies and helpers.
+
+Dependencies are ``async def`` so that FastAPI calls them on the event loop (a plain ``def``
+dependency costs a thread-pool round trip per request).
+"""
 
 from __future__ import annotations
 
@@ -15,11 +19,11 @@ from service.storage import Spacecraft
 __all__ = ["EngineDep", "SettingsDep", "get_spacecraft", "iso", "iso_or_none"]
 
 
-def _engine(request: Request) -> Engine:
+async def _engine(request: Request) -> Engine:
     return request.app.state.engine  # type: ignore[no-any-return]
 
 
-def _settings(request: Request) -> Settings:
+async def _settings(request: Request) -> Settings:
     return request.app.state.settings  # type: ignore[no-any-return]
 
 

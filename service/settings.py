@@ -58,4 +58,9 @@ class Settings(BaseSettings):
     #: Worker threads for the inline job backend.
     inline_workers: int = 1
 
+    #: API-key lookups are cached this long (revocations take effect within it) [s].
+    key_cache_s: float = 5.0
+    #: ``GET .../calibration`` answers are cached this long per spacecraft [s].
+    read_cache_s: float = 1.0
+
     log_level: str = "INFO"

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import asyncio
 import threading
+import time
 from typing import Annotated, Any
 
 import numpy as np
@@ -53,15 +55,7 @@ def retrain_now(
     return JobAccepted(job_id=job_id)
 
 
-@router.get(
-    "/{spacecraft_id}/calibration",
-    response_model=CalibrationDocument,
-    responses=_ERRORS,
-)
-def calibration_in_service(
-    spacecraft_id: str, engine: EngineDep, _who: Annotated[Principal, require_scope("read")]
-) -> Response:
-    """The calibration in service (CONTRACT section 4); 404 before the first."""
+def _served_document(engine: Any, spacecraft_id: str) -> bytes | None:
     with read_tx(engine) as conn:
         sc = get_spacecraft(conn, spacecraft_id)
         doc = conn.execute(
@@ -69,11 +63,48 @@ def calibration_in_service(
                 Calibration.spacecraft_pk == sc.pk, Calibration.status == "in_service"
             )
         ).scalar_one_or_none()
-    if doc is None:
+    return None if doc is None else orjson.dumps(doc)
+
+
+@router.get(
+    "/{spacecraft_id}/calibration",
+    response_model=CalibrationDocument,
+    responses=_ERRORS,
+)
+async def calibration_in_service(
+    spacecraft_id: str,
+    request: Request,
+    engine: EngineDep,
+    settings: SettingsDep,
+    _who: Annotated[Principal, require_scope("read")],
+) -> Response:
+    """The calibration in service (CONTRACT section 4); 404 before the first.
+
+    Answers are cached per spacecraft for ``ORBITCAL_READ_CACHE_S`` (default 1 s).
+    """
+    cache: dict[str, tuple[bytes | None, float]] = request.app.state.calibration_cache
+    hit = cache.get(spacecraft_id)
+    if hit is not None and hit[1] > time.monotonic():
+        body = hit[0]
+    else:
+        # single flight: concurrent misses for one spacecraft wait for one database read
+        locks: dict[str, asyncio.Lock] = request.app.state.calibration_locks
+        lock = locks.setdefault(spacecraft_id, asyncio.Lock())
+        async with lock:
+            hit = cache.get(spacecraft_id)
+            if hit is not None and hit[1] > time.monotonic():
+                body = hit[0]
+            else:
+                body = await run_in_threadpool(_served_document, engine, spacecraft_id)
+                if len(cache) > 100_000:
+                    cache.clear()
+                    locks.clear()
+                cache[spacecraft_id] = (body, time.monotonic() + settings.read_cache_s)
+    if body is None:
         raise HTTPException(
             status_code=404, detail=f"spacecraft {spacecraft_id!r} has no calibration in service"
         )
-    return Response(content=orjson.dumps(doc), media_type="application/json")
+    return Response(content=body, media_type="application/json")
 
 
 @router.get("/{spacecraft_id}/calibrations", responses=_ERRORS)

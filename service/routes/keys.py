@@ -46,10 +46,11 @@ def list_api_keys(engine: EngineDep, _admin: AdminDep) -> list[ApiKeyPublic]:
 
 
 @router.delete("/{prefix}", status_code=204, responses={404: {"model": ErrorPublic}})
-def revoke_api_key(prefix: str, engine: EngineDep, _admin: AdminDep) -> None:
+def revoke_api_key(prefix: str, request: Request, engine: EngineDep, _admin: AdminDep) -> None:
     with write_tx(engine) as conn:
         done = conn.execute(
             sa.update(ApiKey).where(ApiKey.prefix == prefix).values(revoked=True)
         ).rowcount
     if not done:
         raise HTTPException(status_code=404, detail=f"no key with prefix {prefix!r}")
+    request.app.state.key_cache.clear()  # this process forgets the key at once
