@@ -370,3 +370,15 @@ def test_sensor_change_in_orbit_wang2020_eq17(tle_text: str) -> None:
     stale = ground.invert(w.telemetry.b_raw_nt[after]) - w.b_true_body_nt[after]
     assert np.abs(stale).max() > 20.0
     assert w.truth["sensor_after"]["b0_nt"] == [-652.7, 1266.4, -444.49]
+
+
+def test_solar_array_current_is_a_sunlight_witness(state: WorldState, tle_text: str) -> None:
+    current = state.hk["hk_sa_current_a"]
+    dark = state.illumination == 0.0
+    assert np.abs(current[dark]).max() < 0.05  # noise only (σ = 0.01 A)
+    # zenith-facing array of a nadir pointer: lit around the subsolar point, up to 2 A
+    assert 1.5 < current[~dark].max() <= 2.05
+    w = _world(tle_text, 1)
+    x_hk, names = w.telemetry.regressors()
+    assert names == ["temperature", "mtq_x", "mtq_y", "mtq_z", "hk_sa_current_a"]
+    assert x_hk.shape == (len(w.telemetry), 5)

@@ -9,8 +9,9 @@ A world is built in this order (all seeded from one ``np.random.Generator``):
    (IGRF-14 by default) — what a calibration is compared with;
 4. Sun (analytic) and the conical Earth shadow → illumination 0…1;
 5. housekeeping that every spacecraft has, whether or not an effect couples to it: a sensor
-   temperature following the orbital thermal cycle (±10 °C sunlit/eclipse, first-order lag) and
-   magnetorquer dipole commands from a gated B-dot-like law;
+   temperature following the orbital thermal cycle (±10 °C sunlit/eclipse, first-order lag),
+   magnetorquer dipole commands from a gated B-dot-like law and a body-mounted solar array
+   current (``hk_sa_current_a``);
 6. each effect's field-equivalent disturbance ``dB_body_nt`` (see :mod:`orbitcal.simulate.effects`);
 7. the sensor, Wang 2020 eq. 1: ``b_raw = A (b_ref + Σ dB) + B_0 + noise``.
 
@@ -256,6 +257,22 @@ class Housekeeping:
     mtq_bdot_scale_nt_s: float = 20.0
     mtq_duty: float = 0.6
     mtq_dwell_s: float = 120.0
+    solar_array_normal_body: tuple[float, float, float] = (0.0, 0.0, -1.0)
+    solar_array_current_max_a: float = 2.0
+    solar_array_noise_a: float = 0.01
+
+    def solar_array_current_a(
+        self, illumination: FloatArray, sun_body_unit: FloatArray, *, rng: np.random.Generator
+    ) -> FloatArray:
+        """Body-mounted solar array current [A] (channel ``hk_sa_current_a``).
+
+        ``I = I_max · ν · max(0, ŝ_body · n̂)`` plus white noise, ``ν`` the visible solar disc.
+        """
+        n_hat = np.asarray(self.solar_array_normal_body, dtype=np.float64)
+        n_hat = n_hat / np.linalg.norm(n_hat)
+        cos_inc = np.clip(sun_body_unit @ n_hat, 0.0, None)
+        current = self.solar_array_current_max_a * illumination * cos_inc
+        return current + rng.normal(0.0, self.solar_array_noise_a, current.shape)
 
     def mtq_commands_am2(
         self, t_utc_s: FloatArray, b_body_nt: FloatArray, *, rng: np.random.Generator
@@ -329,6 +346,11 @@ class WorldState:
         )
         self.temperature_c = temp + hk_rng.normal(0.0, housekeeping.temperature_noise_c, temp.size)
         self.mtq_am2 = housekeeping.mtq_commands_am2(self.t_utc_s, self.b_ref_body_nt, rng=hk_rng)
+        self.hk: dict[str, FloatArray] = {
+            "hk_sa_current_a": housekeeping.solar_array_current_a(
+                self.illumination, self.sun_body_unit, rng=hk_rng
+            )
+        }
 
     def __len__(self) -> int:
         return int(self.t_utc_s.size)
@@ -614,7 +636,8 @@ def simulate_world(
 
     temperature = extra_hk.pop("temperature", state.temperature_c)
     mtq = state.mtq_am2
-    hk = {k: np.asarray(v) for k, v in extra_hk.items() if k.startswith("hk_")}
+    hk = dict(state.hk)
+    hk.update({k: np.asarray(v) for k, v in extra_hk.items() if k.startswith("hk_")})
     telemetry = Telemetry(
         t_utc_s=t,
         b_raw_nt=b_raw,
