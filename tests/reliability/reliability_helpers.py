@@ -7,6 +7,7 @@ sample is identified by its time, and a batch by its first time.
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import signal
@@ -40,6 +41,20 @@ SWARM_A_TLE = (
     "2 39452  87.3611 208.4349 0002354 100.1496 260.0021 15.32769581488835"
 )
 CSV = {"content-type": "text/csv"}
+
+
+def _root_conftest() -> Any:
+    spec = importlib.util.spec_from_file_location(
+        "_reliability_root_conftest", HERE.parent / "conftest.py"
+    )
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+#: ``require_service(name, port)`` of tests/conftest.py: skips locally, fails in CI.
+require_service = _root_conftest().require_service
 
 
 def free_port() -> int:
