@@ -382,3 +382,32 @@ def test_solar_array_current_is_a_sunlight_witness(state: WorldState, tle_text: 
     x_hk, names = w.telemetry.regressors()
     assert names == ["temperature", "mtq_x", "mtq_y", "mtq_z", "hk_sa_current_a"]
     assert x_hk.shape == (len(w.telemetry), 5)
+
+
+def test_real_swarm_storm_field_through_a_synthetic_sensor(
+    authorities: Path, tmp_path: Path
+) -> None:
+    """Swarm A MAG_LR_1B, 2016-01-01 storm: measured B_NEC at its positions → raw telemetry."""
+    import h5py
+
+    from orbitcal.frames import spherical_to_itrs
+    from orbitcal.simulate import simulate_measured_field
+
+    with h5py.File(authorities / "test_fac_singlesat_swarm.nc4") as h:
+        g = h["SW_OPER_MAGA_LR_1B"]
+        t = pd.Timestamp("2016-01-01T00:00:00Z").timestamp() + g["Timestamp"][:].astype(float)
+        r = spherical_to_itrs(g["Radius"][:] / 1e3, 90.0 - g["Latitude"][:], g["Longitude"][:])
+        b_nec = g["B_NEC"][:]
+    w = simulate_measured_field(
+        t, r, b_nec, rng=np.random.default_rng(0), source="Swarm A MAG_LR_1B 2016-01-01"
+    )
+    assert w.tle is None and w.telemetry.r_itrs_km is not None
+    gap = w.injected_body_nt["measured_minus_reference"]
+    # storm (RC ≈ −129 nT) plus an auroral crossing: the gap to IGRF-14 is ~100 nT or more
+    assert 50.0 < w.truth["effects"][0]["rms_nt"] < 1000.0
+    # the measured magnitude survives the attitude rotation exactly
+    np.testing.assert_allclose(
+        np.linalg.norm(w.b_ref_body_nt + gap, axis=1), np.linalg.norm(b_nec, axis=1), rtol=1e-12
+    )
+    back = read_world(w.write(tmp_path / "swarm", fmt="parquet")["telemetry"].parent)
+    assert back.tle_text == "" and len(back.telemetry) == 1800

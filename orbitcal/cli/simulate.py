@@ -153,7 +153,7 @@ def run(args: argparse.Namespace) -> int:
     paths = world.write(args.out, fmt=args.format)
     names = ", ".join(e["name"] for e in world.truth["effects"]) or "none"
     print(
-        f"simulated {len(world.telemetry)} samples of NORAD {world.tle.norad_id} "
+        f"simulated {len(world.telemetry)} samples of NORAD {world.truth['spacecraft']} "
         f"({args.attitude}, effects: {names}) → {paths['telemetry']}"
     )
     return 0

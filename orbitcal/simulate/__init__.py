@@ -43,6 +43,7 @@ from orbitcal.simulate.world import (
     parse_tles,
     read_world,
     select_tle,
+    simulate_measured_field,
     simulate_world,
 )
 
@@ -70,6 +71,7 @@ __all__ = [
     "parse_tles",
     "read_world",
     "select_tle",
+    "simulate_measured_field",
     "simulate_world",
     "wang2020_ground",
     "wang2020_orbit",

@@ -315,7 +315,8 @@ class OrbitErrorEffect(Effect):
         if self.true_tle:
             from orbitcal.simulate.world import kinematics, select_tle
 
-            true_set = select_tle(self.true_tle, norad_id=state.tle.norad_id, at_utc_s=float(t[0]))
+            norad = state.tle.norad_id if state.tle is not None else None
+            true_set = select_tle(self.true_tle, norad_id=norad, at_utc_s=float(t[0]))
             r_true_itrs = kinematics(true_set, state.attitude, t).r_itrs_km
             r_true_gcrs = frames.itrs_to_gcrs(r_true_itrs, t)
         else:

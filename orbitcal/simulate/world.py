@@ -59,6 +59,7 @@ __all__ = [
     "parse_tles",
     "read_world",
     "select_tle",
+    "simulate_measured_field",
     "simulate_world",
 ]
 
@@ -314,7 +315,7 @@ class WorldState:
     def __init__(
         self,
         *,
-        tle: TleSet,
+        tle: TleSet | None,
         attitude: AttitudeProfile,
         field: str,
         kin: Kinematics,
@@ -375,6 +376,11 @@ class WorldState:
 
     def kinematics_at(self, t_utc_s: FloatArray) -> Kinematics:
         """Orbit and attitude of this world's spacecraft at other times."""
+        if self.tle is None:
+            raise ValueError(
+                "this world has positions but no orbit (measured-field world): effects that "
+                "re-evaluate the orbit (time_offset, orbit_error) need a TLE"
+            )
         return kinematics(self.tle, self.attitude, t_utc_s)
 
     def field_body_nt(
@@ -424,8 +430,9 @@ class World:
     ----------
     telemetry : Telemetry
         What the spacecraft downlinks (CONTRACT section 1).
-    tle : TleSet
-        The element set the operator has (the one written with the world).
+    tle : TleSet or None
+        The element set the operator has (the one written with the world); None for a world
+        built on measured positions (:func:`simulate_measured_field`).
     sensor : SensorModel
         True sensor parameters.
     effects : list of Effect
@@ -439,7 +446,7 @@ class World:
     """
 
     telemetry: Telemetry
-    tle: TleSet
+    tle: TleSet | None
     sensor: SensorModel
     effects: list[Effect]
     b_ref_body_nt: FloatArray
@@ -477,7 +484,10 @@ class World:
         }
         format_from_path(paths["telemetry"])  # validates fmt
         write_telemetry(paths["telemetry"], self.telemetry)
-        paths["tle"].write_text(self.tle.text)
+        if self.tle is not None:
+            paths["tle"].write_text(self.tle.text)
+        else:
+            del paths["tle"]
         truth = dict(self.truth)
         truth["files"] = {k: p.name for k, p in paths.items()}
         paths["truth"].write_text(json.dumps(_jsonable(truth), indent=2) + "\n")
@@ -496,7 +506,7 @@ class WorldFiles:
     """A world read back from its directory (see :meth:`World.write`)."""
 
     telemetry: Telemetry
-    tle_text: str
+    tle_text: str  # "" for a measured-field world (positions in the telemetry)
     truth: dict[str, Any]
     samples: pd.DataFrame
 
@@ -521,7 +531,8 @@ def read_world(directory: str | Path) -> WorldFiles:
     if res.rejected:
         raise ValueError(f"{root}: {len(res.rejected)} telemetry rows rejected: {res.rejected[0]}")
     samples = pd.read_parquet(root / files.get("truth_samples", "truth_samples.parquet"))
-    tle_text = (root / files.get("tle", "spacecraft.tle")).read_text()
+    tle_path = root / files.get("tle", "spacecraft.tle")
+    tle_text = tle_path.read_text() if tle_path.is_file() else ""
     return WorldFiles(res.telemetry, tle_text, truth, samples)
 
 
@@ -684,5 +695,114 @@ def simulate_world(
         effects=list(effects),
         b_ref_body_nt=state.b_ref_body_nt,
         injected_body_nt=injected,
+        truth=truth,
+    )
+
+
+def simulate_measured_field(
+    t_utc_s: npt.ArrayLike,
+    r_itrs_km: npt.ArrayLike,
+    b_nec_nt: npt.ArrayLike,
+    *,
+    rng: np.random.Generator,
+    attitude: AttitudeProfile | None = None,
+    sensor: SensorModel | None = None,
+    field: str = "IGRF-14",
+    housekeeping: Housekeeping | None = None,
+    source: str = "",
+    seed: int | None = None,
+) -> World:
+    """Put a real measured field through a synthetic attitude and sensor.
+
+    E.g. the Swarm A storm pass: its measured ``B_NEC`` at its own positions becomes raw
+    magnetometer telemetry of a spacecraft with the given attitude profile, so the whole gap between
+    the measurement and the reference field (external, crustal, auroral currents) is real.
+
+    Parameters
+    ----------
+    t_utc_s : array_like, shape (N,)
+        Sample times, POSIX seconds of UTC [s] (ascending).
+    r_itrs_km : array_like, shape (N, 3)
+        Positions, ITRS [km]; written to the telemetry (``r_x, r_y, r_z``).
+    b_nec_nt : array_like, shape (N, 3)
+        Measured field, geocentric North, East, Centre [nT].
+    rng : numpy.random.Generator
+        Seeded source (sensor, housekeeping, noise).
+    attitude : AttitudeProfile or None
+        Default nadir pointing; velocities for it come from differentiating the positions.
+    sensor : SensorModel or None
+        Default ``SensorModel.random``.
+    field : str
+        Reference field for ``b_ref_body_nt`` (the calibration target), default IGRF-14.
+    source : str
+        Where the measurement came from (recorded in the truth).
+
+    Returns
+    -------
+    World
+        ``injected_body_nt["measured_minus_reference"]`` holds measured − reference in body axes;
+        ``tle`` is None.
+    """
+    t = np.asarray(t_utc_s, dtype=np.float64)
+    r_itrs = np.asarray(r_itrs_km, dtype=np.float64)
+    b_nec = np.asarray(b_nec_nt, dtype=np.float64)
+    if t.ndim != 1 or t.size < 2 or r_itrs.shape != (t.size, 3) or b_nec.shape != (t.size, 3):
+        raise ValueError("need t (N,), r_itrs_km (N, 3) and b_nec_nt (N, 3) with N ≥ 2")
+    if np.any(np.diff(t) <= 0):
+        raise ValueError("times must be strictly ascending")
+    profile: AttitudeProfile = attitude if attitude is not None else NadirLVLH()
+    housekeeping = housekeeping or Housekeeping()
+    sensor_rng, hk_rng, noise_rng = rng.spawn(3)
+    sensor = sensor or SensorModel.random(rng=sensor_rng)
+    r_gcrs = frames.itrs_to_gcrs(r_itrs, t)
+    v_gcrs = np.gradient(r_gcrs, t, axis=0)
+    kin = Kinematics(t, r_itrs, r_gcrs, v_gcrs, profile.q_wxyz(t, r_gcrs, v_gcrs))
+    state = WorldState(
+        tle=None, attitude=profile, field=field, kin=kin, housekeeping=housekeeping, hk_rng=hk_rng
+    )
+    b_meas_body = state.itrs_to_body(frames.nec_to_itrs(b_nec, r_itrs))
+    gap = b_meas_body - state.b_ref_body_nt
+    telemetry = Telemetry(
+        t_utc_s=t,
+        b_raw_nt=sensor.measure(b_meas_body, rng=noise_rng),
+        q_wxyz=kin.q_wxyz,
+        r_itrs_km=r_itrs,
+        temperature_c=state.temperature_c,
+        mtq_am2=state.mtq_am2,
+        hk=dict(state.hk),
+    )
+    truth: dict[str, Any] = {
+        "spacecraft": source or "measured",
+        "source": source,
+        "start": utc_s_to_iso([t[0]])[0],
+        "end": utc_s_to_iso([t[-1]])[0],
+        "n": int(t.size),
+        "attitude": profile.to_dict(),
+        "attitude_frame": "GCRS",
+        "reference_field": field,
+        "sensor": sensor.to_dict(),
+        "linear": sensor.linear,
+        "effects": [
+            {
+                "name": "measured_minus_reference",
+                "params": {},
+                "rms_nt": _rms(gap),
+                "axis_rms_nt": np.sqrt(np.mean(gap**2, axis=0)).tolist(),
+                "max_nt": float(np.max(np.linalg.norm(gap, axis=1))),
+            }
+        ],
+        "verdict": "measured",
+        "housekeeping": _jsonable(housekeeping.__dict__),
+        "eclipse_fraction": float(np.mean(state.illumination < 0.5)),
+        "b_ref_rms_nt": _rms(state.b_ref_body_nt),
+        "seed": seed,
+    }
+    return World(
+        telemetry=telemetry,
+        tle=None,
+        sensor=sensor,
+        effects=[],
+        b_ref_body_nt=state.b_ref_body_nt,
+        injected_body_nt={"measured_minus_reference": gap},
         truth=truth,
     )
