@@ -494,18 +494,29 @@ def _numeric_column(series: pd.Series) -> tuple[FloatArray, npt.NDArray[np.bool_
 
 
 def _parse_times(series: pd.Series) -> tuple[FloatArray, dict[int, str]]:
-    """Time column → seconds in the declared scale; fast pyarrow path for clean ISO strings."""
+    """Time column → seconds in the declared scale.
+
+    Fast pyarrow paths for a clean text column of ISO-8601 times or of Unix-second numbers; any
+    irregular column goes through :func:`orbitcal.timescales.parse_time_values`, which names
+    every bad row.
+    """
     if series.dtype.kind not in "iufM":
         try:
             arr = pa.array(series, from_pandas=True)
             if not (pa.types.is_string(arr.type) or pa.types.is_large_string(arr.type)):
                 raise TypeError("not a text column")
-            ts = pc.cast(arr, pa.timestamp("ns", tz="UTC"))
-            if ts.null_count == 0:
-                ns = ts.cast(pa.int64()).to_numpy()
-                whole = np.floor_divide(ns, 1_000_000_000)
-                t = whole.astype(np.float64) + (ns - whole * 1_000_000_000) * 1e-9
-                return t, {}
+            if arr.null_count == 0:
+                try:
+                    ts = pc.cast(arr, pa.timestamp("ns", tz="UTC"))
+                except pa.ArrowInvalid:
+                    num = pc.cast(arr, pa.float64()).to_numpy(zero_copy_only=False)
+                    if np.all(np.isfinite(num)):
+                        return num, {}
+                else:
+                    ns = ts.cast(pa.int64()).to_numpy()
+                    whole = np.floor_divide(ns, 1_000_000_000)
+                    t = whole.astype(np.float64) + (ns - whole * 1_000_000_000) * 1e-9
+                    return t, {}
         except (pa.ArrowException, TypeError, ValueError):
             pass
     t_s, errors = parse_time_values(series)
