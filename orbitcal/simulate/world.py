@@ -593,6 +593,11 @@ def simulate_world(
     """
     if duration_s <= 0 or cadence_s <= 0:
         raise ValueError("duration_s and cadence_s must be positive")
+    n = int(np.floor(duration_s / cadence_s + 1e-9))
+    if n < 2:
+        raise ValueError(f"{n} sample(s): make duration_s at least twice cadence_s")
+    if (sensor_after is None) != (sensor_change_utc_s is None):
+        raise ValueError("give both sensor_after and sensor_change_utc_s, or neither")
     tle_set = (
         tle if isinstance(tle, TleSet) else select_tle(tle, norad_id=norad_id, at_utc_s=start_utc_s)
     )
@@ -602,7 +607,6 @@ def simulate_world(
     sensor_rng, hk_rng, noise_rng, effect_rngs = children[0], children[1], children[2], children[3:]
     sensor = sensor or SensorModel.random(rng=sensor_rng)
 
-    n = int(np.floor(duration_s / cadence_s + 1e-9))
     t = np.asarray(start_utc_s + np.arange(n) * cadence_s, dtype=np.float64)
     kin = kinematics(tle_set, profile, t)
     state = WorldState(
@@ -636,14 +640,14 @@ def simulate_world(
     b_true = state.b_ref_body_nt.copy()
     for db in injected.values():
         b_true += db
-    b_raw = sensor.measure(b_true, rng=noise_rng)
-    if (sensor_after is None) != (sensor_change_utc_s is None):
-        raise ValueError("give both sensor_after and sensor_change_utc_s, or neither")
+    # Wang 2020 eq. 1 (the same draws as SensorModel.measure: normal = σ · standard normal).
+    z = noise_rng.standard_normal(b_true.shape)
+    b_raw = sensor.measure_noiseless(b_true) + sensor.noise_std_nt * z
     if sensor_after is not None and sensor_change_utc_s is not None:
         after = t >= sensor_change_utc_s
-        noise = b_raw - sensor.measure_noiseless(b_true)
-        scale = sensor_after.noise_std_nt / sensor.noise_std_nt if sensor.noise_std_nt else 0.0
-        b_raw[after] = sensor_after.measure_noiseless(b_true[after]) + scale * noise[after]
+        b_raw[after] = (
+            sensor_after.measure_noiseless(b_true[after]) + sensor_after.noise_std_nt * z[after]
+        )
 
     temperature = extra_hk.pop("temperature", state.temperature_c)
     mtq = state.mtq_am2
