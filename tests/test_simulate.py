@@ -411,3 +411,25 @@ def test_real_swarm_storm_field_through_a_synthetic_sensor(
     )
     back = read_world(w.write(tmp_path / "swarm", fmt="parquet")["telemetry"].parent)
     assert back.tle_text == "" and len(back.telemetry) == 1800
+
+
+def test_time_offset_under_tumbling_includes_the_body_rotation(tle_text: str) -> None:
+    rate = (0.6, -1.2, 1.5)  # deg/s: ~2 °/s, so 0.1 s rotates B by ~0.2° (~140 nT)
+    w = simulate_world(
+        tle_text,
+        norad_id=SWARM_A,
+        start_utc_s=START_UTC_S,
+        duration_s=600.0,
+        cadence_s=0.5,
+        rng=np.random.default_rng(0),
+        attitude=Tumbling(rate_body_deg_s=rate),
+        effects=[make_effect("time_offset", offset_s=0.1)],
+    )
+    assert w.truth["attitude"]["t0_utc_s"] == START_UTC_S
+    db = w.injected_body_nt["time_offset"]
+    rate_nt_s = np.gradient(w.b_ref_body_nt, w.telemetry.t_utc_s, axis=0)
+    inner = slice(1, -1)  # central differences
+    np.testing.assert_allclose(
+        db[inner], -0.1 * rate_nt_s[inner], atol=0.03 * np.abs(0.1 * rate_nt_s).max()
+    )
+    assert _rms(db) > 50.0

@@ -23,6 +23,7 @@ is kept in :class:`World` and written next to the telemetry and the TLE by :meth
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -38,7 +39,7 @@ from orbitcal import frames
 from orbitcal.attitude import frame_to_body
 from orbitcal.orbit import Orbit
 from orbitcal.sensor import SensorModel
-from orbitcal.simulate.attitude_profiles import AttitudeProfile, NadirLVLH
+from orbitcal.simulate.attitude_profiles import AttitudeProfile, NadirLVLH, Tumbling
 from orbitcal.sun import illumination_conical, sun_position_gcrs_km
 from orbitcal.telemetry import Telemetry, format_from_path, write_telemetry
 from orbitcal.timescales import utc_s_to_iso
@@ -536,6 +537,14 @@ def read_world(directory: str | Path) -> WorldFiles:
     return WorldFiles(res.telemetry, tle_text, truth, samples)
 
 
+def _anchor(profile: AttitudeProfile, t0_utc_s: float) -> AttitudeProfile:
+    """Fix a tumbling profile's reference time to the world's start, so that re-evaluating the
+    attitude at other times (time_offset) continues the same motion instead of restarting it."""
+    if isinstance(profile, Tumbling) and profile.t0_utc_s is None:
+        return dataclasses.replace(profile, t0_utc_s=t0_utc_s)
+    return profile
+
+
 def simulate_world(
     tle: TleSet | str,
     *,
@@ -608,6 +617,7 @@ def simulate_world(
     sensor = sensor or SensorModel.random(rng=sensor_rng)
 
     t = np.asarray(start_utc_s + np.arange(n) * cadence_s, dtype=np.float64)
+    profile = _anchor(profile, float(t[0]))
     kin = kinematics(tle_set, profile, t)
     state = WorldState(
         tle=tle_set,
@@ -758,6 +768,7 @@ def simulate_measured_field(
     housekeeping = housekeeping or Housekeeping()
     sensor_rng, hk_rng, noise_rng = rng.spawn(3)
     sensor = sensor or SensorModel.random(rng=sensor_rng)
+    profile = _anchor(profile, float(t[0]))
     r_gcrs = frames.itrs_to_gcrs(r_itrs, t)
     v_gcrs = np.gradient(r_gcrs, t, axis=0)
     kin = Kinematics(t, r_itrs, r_gcrs, v_gcrs, profile.q_wxyz(t, r_gcrs, v_gcrs))
