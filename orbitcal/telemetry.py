@@ -392,6 +392,8 @@ def _read_csv_bytes(data: bytes) -> tuple[pd.DataFrame, dict[int, str]]:
     """CSV → frame in data-row order plus reasons for rows with the wrong number of fields."""
     if not data.strip():
         raise TelemetryError("empty CSV: a header row with at least time,b_x,b_y,b_z is required")
+    if data.startswith(b"\xef\xbb\xbf"):
+        data = data[3:]  # UTF-8 byte-order mark (spreadsheet exports)
     invalid: list[Any] = []
     try:
         # Multi-threaded columnar reader; times kept as text, numbers inferred per column.
@@ -529,7 +531,7 @@ def _add(reasons: dict[int, list[str]], rows: npt.NDArray[np.intp], text: str) -
 
 
 def _validate(df: pd.DataFrame, *, time_scale: str, pre_errors: dict[int, str]) -> ReadResult:
-    columns = [str(c) for c in df.columns]
+    columns = [str(c).strip() for c in df.columns]
     df.columns = pd.Index(columns)
     missing = [c for c in REQUIRED_COLUMNS if c not in columns]
     if missing and not (pre_errors and len(pre_errors) == len(df)):

@@ -363,3 +363,10 @@ def test_ndjson_text_channel_with_braces_round_trips(tmp_path: Path) -> None:
     assert path.read_bytes().count(b"\n") == 2
     res = read_telemetry(path)
     assert list(res.telemetry.hk["hk_note"]) == ['{"a": 1},{"b": 2}', "plain"]
+
+
+def test_spreadsheet_csv_with_bom_and_spaced_header() -> None:
+    csv = "\ufefftime, b_x, b_y, b_z\n2023-01-01T00:00:00Z, 1, 2, 3\n".encode()
+    res = parse_telemetry(csv, fmt="csv")
+    assert res.rejected == []
+    np.testing.assert_array_equal(res.telemetry.b_raw_nt, [[1, 2, 3]])
