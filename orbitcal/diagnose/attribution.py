@@ -169,9 +169,15 @@ def fit_joint(
     w = np.ones_like(y)
     theta = np.zeros(x.shape[1])
     sigma = 1.0
+    normal = np.eye(x.shape[1])
+    ridge = 1e-10 * np.eye(x.shape[1])
     for it in range(iterations if robust else 1):
-        sw = np.sqrt(w)
-        theta = np.linalg.lstsq(x * sw[:, None], y * sw, rcond=None)[0].astype(float)
+        xw = x * w[:, None]
+        normal = x.T @ xw + ridge * x.shape[0]
+        try:
+            theta = np.linalg.solve(normal, xw.T @ y)
+        except np.linalg.LinAlgError:  # pragma: no cover - singular design
+            theta = np.linalg.lstsq(x * np.sqrt(w)[:, None], y * np.sqrt(w), rcond=None)[0]
         r = y - x @ theta
         sigma = max(float(1.4826 * np.median(np.abs(r - np.median(r)))), 1e-6)
         if not robust or it == iterations - 1:
@@ -179,11 +185,7 @@ def fit_joint(
         u = np.abs(r) / (2.5 * sigma)
         w = np.where(u <= 1.0, 1.0, 1.0 / np.maximum(u, 1e-12))
     # Covariance of the calibration parameters (white-noise assumption; the split tests inflate it).
-    xw = x * np.sqrt(w)[:, None]
-    try:
-        cov_scaled = np.linalg.pinv(xw.T @ xw) * sigma**2
-    except np.linalg.LinAlgError:  # pragma: no cover - pinv converges for finite input
-        cov_scaled = np.full((x.shape[1], x.shape[1]), np.nan)
+    cov_scaled = np.linalg.pinv(normal) * sigma**2
     cov = cov_scaled / np.outer(scale, scale)
     theta = theta / scale
     a = theta[:9].reshape(3, 3) / FIELD_SCALE_NT

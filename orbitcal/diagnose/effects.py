@@ -41,7 +41,6 @@ __all__ = [
     "dipole_axis_itrs",
     "get_effect",
     "magnetic_latitude_deg",
-    "nec_basis_itrs",
 ]
 
 FloatArray = npt.NDArray[np.float64]
@@ -89,29 +88,6 @@ def magnetic_latitude_deg(r_itrs_km: FloatArray) -> FloatArray:
     """Centred-dipole magnetic latitude [deg] of ITRS positions ``(..., 3)`` [km]."""
     r_hat = r_itrs_km / np.linalg.norm(r_itrs_km, axis=-1, keepdims=True)
     return np.degrees(np.arcsin(np.clip(r_hat @ dipole_axis_itrs(), -1.0, 1.0)))
-
-
-def nec_basis_itrs(r_itrs_km: FloatArray) -> FloatArray:
-    """Geocentric North, East, Centre unit vectors at ITRS positions.
-
-    Parameters
-    ----------
-    r_itrs_km : ndarray, shape (N, 3)
-        Positions, ITRS [km].
-
-    Returns
-    -------
-    ndarray, shape (N, 3, 3)
-        ``basis[n, k]`` is the k-th unit vector (k = 0 North, 1 East, 2 Centre = down) in ITRS, so
-        ``b_itrs = b_nec @ basis`` and ``b_nec = basis @ b_itrs`` per sample.
-    """
-    r = np.asarray(r_itrs_km, dtype=float)
-    up = r / np.linalg.norm(r, axis=-1, keepdims=True)
-    z = np.array([0.0, 0.0, 1.0])
-    east = np.cross(z, up)
-    east /= np.linalg.norm(east, axis=-1, keepdims=True)
-    north = np.cross(up, east)
-    return np.stack([north, east, -up], axis=-2)
 
 
 def _segments(t_s: FloatArray) -> list[slice]:
@@ -169,6 +145,11 @@ class DiagnosisData:
         Name of that crustal model (e.g. ``"LCS-1"``).
     reference_field : str
         Name of the reference field with its generation (e.g. ``"IGRF-14"``).
+    illumination : ndarray, shape (N,), optional
+        Visible fraction of the solar disc, 0 (umbra) to 1 [-]; refines ``sunlit``.
+    b_ext_body_nt : ndarray, shape (N, 3), optional
+        An RC-index-driven magnetospheric field model (``orbitcal.field`` ``"RC"``), body frame
+        [nT].
     """
 
     t_utc_s: FloatArray
@@ -184,6 +165,8 @@ class DiagnosisData:
     b_crust_body_nt: FloatArray | None = None
     crust_model: str | None = None
     reference_field: str = "IGRF-14"
+    illumination: FloatArray | None = None
+    b_ext_body_nt: FloatArray | None = None
 
     def __post_init__(self) -> None:
         n = self.t_utc_s.shape[0]
@@ -221,6 +204,8 @@ class DiagnosisData:
             b_crust_body_nt=pick(self.b_crust_body_nt),  # type: ignore[arg-type]
             crust_model=self.crust_model,
             reference_field=self.reference_field,
+            illumination=pick(self.illumination),  # type: ignore[arg-type]
+            b_ext_body_nt=pick(self.b_ext_body_nt),  # type: ignore[arg-type]
         )
 
     def hk(self, name: str) -> FloatArray | None:
@@ -288,6 +273,22 @@ class DiagnosisData:
         e1 /= np.maximum(np.linalg.norm(e1, axis=1, keepdims=True), 1e-12)
         e2 = np.cross(b, e1)
         return np.stack([e1, e2], axis=1)
+
+    @cached_property
+    def mlt_angle_rad(self) -> FloatArray | None:
+        """Magnetic local time angle [rad]: 0 at magnetic noon, +pi/2 at dusk (None without Sun).
+
+        The Sun direction is projected on the dipole equator (SM x); SM y = dipole axis x SM x.
+        """
+        if self.sun_body is None:
+            return None
+        z = dipole_axis_itrs()
+        sun_itrs = np.einsum("nji,nj->ni", self.rot_itrs_to_body, self.sun_body)
+        x_sm = sun_itrs - np.outer(sun_itrs @ z, z)
+        x_sm /= np.maximum(np.linalg.norm(x_sm, axis=1, keepdims=True), 1e-12)
+        y_sm = np.cross(z, x_sm)
+        r = self.r_itrs_km
+        return np.arctan2(np.sum(r * y_sm, axis=1), np.sum(r * x_sm, axis=1))
 
     @cached_property
     def orbit_phase_rad(self) -> FloatArray:
@@ -371,6 +372,14 @@ def _per_axis(columns: Sequence[FloatArray]) -> FloatArray:
     return g
 
 
+def _diag_rows(x: FloatArray) -> FloatArray:
+    """(N, 3) -> (N, 3, 3): per-sample diagonal matrices (axis i scaled by x[:, i])."""
+    out = np.zeros((x.shape[0], 3, 3))
+    idx = np.arange(3)
+    out[:, idx, idx] = x
+    return out
+
+
 def _varies(x: FloatArray | None, *, tol: float = 1e-9) -> bool:
     return x is not None and bool(np.all(np.isfinite(x))) and float(np.std(x)) > tol
 
@@ -381,9 +390,7 @@ def _design_temperature(data: DiagnosisData, train: BoolArray) -> DesignBlock | 
         return None
     dtemp = temp - float(np.mean(temp[train]))
     scaled = data.b_ref_body_nt / FIELD_SCALE_NT
-    g = np.concatenate(
-        [_per_axis([dtemp]), np.stack([np.diag(v) for v in (dtemp[:, None] * scaled)])], axis=2
-    )
+    g = np.concatenate([_per_axis([dtemp]), _diag_rows(dtemp[:, None] * scaled)], axis=2)
     names = [f"offset_{a}_nt_per_degc" for a in "xyz"] + [
         f"scale_{a}_per_degc_x{FIELD_SCALE_NT:.0e}" for a in "xyz"
     ]
@@ -410,17 +417,32 @@ def _design_time_offset(data: DiagnosisData, train: BoolArray) -> DesignBlock | 
 
 def _design_external(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
     axis = data.dipole_axis_body
-    cols = [axis]
-    names = ["uniform_along_dipole_nt"]
+    tau = _tau_days(data, train)
+    options = [
+        DesignBlock(
+            np.stack([axis, axis * tau[:, None]], axis=2),
+            ["uniform_along_dipole_nt", "uniform_trend_nt_per_day"],
+            variant="dipole_axis",
+        )
+    ]
     rc = data.rc_index_nt
     if rc is not None and _varies(rc[train], tol=1.0):
-        cols.append(axis * (rc - float(np.mean(rc[train])))[:, None])
-        names.append("rc_coefficient")
-    else:
-        cols.append(axis * _tau_days(data, train)[:, None])
-        names.append("uniform_trend_nt_per_day")
-    variant = "rc_index" if names[1] == "rc_coefficient" else "per_window"
-    return DesignBlock(np.stack(cols, axis=2), names, variant=variant)
+        options.append(
+            DesignBlock(
+                np.stack([axis, axis * (rc - float(np.mean(rc[train])))[:, None]], axis=2),
+                ["uniform_along_dipole_nt", "rc_coefficient"],
+                variant="rc_index",
+            )
+        )
+    if data.b_ext_body_nt is not None and _varies(data.b_ext_body_nt[train, 0], tol=1e-3):
+        options.append(
+            DesignBlock(
+                np.stack([axis, data.b_ext_body_nt], axis=2),
+                ["uniform_along_dipole_nt", "rc_model_scale"],
+                variant="rc_model",
+            )
+        )
+    return DesignBlock(options[0].g, options[0].names, options[0].variant, tuple(options[1:]))
 
 
 def _design_crustal(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
@@ -432,9 +454,13 @@ def _design_crustal(data: DiagnosisData, train: BoolArray) -> DesignBlock | None
 
 
 def _design_sun(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
-    if data.sunlit is None or data.sun_body is None:
+    if data.sun_body is None or (data.sunlit is None and data.illumination is None):
         return None
-    lit = data.sunlit.astype(float)
+    lit = (
+        np.asarray(data.illumination, dtype=float)
+        if data.illumination is not None
+        else np.asarray(data.sunlit, dtype=float)
+    )
     if not (0.02 < float(np.mean(lit[train])) < 0.98):
         return None
     cols = [lit] + [lit * data.sun_body[:, k] for k in range(3)]
@@ -448,8 +474,8 @@ def _design_nonlinearity(data: DiagnosisData, train: BoolArray) -> DesignBlock |
     b = data.b_ref_body_nt / FIELD_SCALE_NT
     g = np.concatenate(
         [
-            np.stack([np.diag(v) for v in b**2]),
-            np.stack([np.diag(v) for v in b**3]),
+            _diag_rows(b**2),
+            _diag_rows(b**3),
         ],
         axis=2,
     )
@@ -471,9 +497,7 @@ def _design_drift(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
     names_s = [f"scale_{a}_x{FIELD_SCALE_NT:.0e}" for a in "xyz"]
 
     def block(x: FloatArray) -> FloatArray:
-        return np.concatenate(
-            [_per_axis([x]), np.stack([np.diag(v) for v in (x[:, None] * scaled)])], axis=2
-        )
+        return np.concatenate([_per_axis([x]), _diag_rows(x[:, None] * scaled)], axis=2)
 
     trend = block(tau)
     best = DesignBlock(trend, [n + "_nt_per_day" for n in names_b + names_s], variant="trend")
@@ -487,11 +511,9 @@ def _design_drift(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
     for frac in np.linspace(0.1, 0.9, 17):
         ts = float(t_train[0] + frac * span)
         h = (data.t_utc_s >= ts).astype(float)
-        steps.append(
-            DesignBlock(
-                block(h), [n + "_step_nt" for n in names_b + names_s], variant=f"step@{ts:.0f}"
-            )
-        )
+        g = np.concatenate([block(h), _per_axis([tau])], axis=2)
+        names = [n + "_step_nt" for n in names_b + names_s] + [n + "_nt_per_day" for n in names_b]
+        steps.append(DesignBlock(g, names, variant=f"step@{ts:.0f}+trend"))
     return DesignBlock(best.g, best.names, best.variant, alternatives=tuple(steps))
 
 
@@ -505,47 +527,102 @@ def _design_fac(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
     mlat = data.mlat_deg
     if not np.any(np.abs(mlat[train]) > FAC_MIN_MLAT_DEG):
         return None
+    east = data.transverse_body[:, 0, :]
+    phi = data.mlt_angle_rad
+    # Region-1/2 currents reverse between dawn and dusk: each latitude bump is modulated by
+    # 1, sin and cos of the magnetic local time angle (when the Sun direction is known).
+    mods = {"": np.ones(data.n)}
+    if phi is not None:
+        mods = {"": np.ones(data.n), "_sin_mlt": np.sin(phi), "_cos_mlt": np.cos(phi)}
     cols = []
     names = []
-    perp = data.transverse_body
     for hemi, sign in (("n", 1.0), ("s", -1.0)):
         for c in FAC_CENTRES_DEG:
             bump = np.exp(-0.5 * ((sign * mlat - c) / FAC_WIDTH_DEG) ** 2)
             bump[sign * mlat < FAC_MIN_MLAT_DEG - 3 * FAC_WIDTH_DEG] = 0.0
             if float(np.max(bump[train], initial=0.0)) < 0.05:
                 continue
-            for k, comp in enumerate(("east", "perp")):
-                cols.append(perp[:, k, :] * bump[:, None])
-                names.append(f"{comp}_{hemi}{c:.0f}_nt")
+            for suffix, m in mods.items():
+                cols.append(east * (bump * m)[:, None])
+                names.append(f"east_{hemi}{c:.0f}{suffix}_nt")
     if not cols:
         return None
     return DesignBlock(np.stack(cols, axis=2), names)
 
 
-def _design_attitude(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
-    # A slowly varying small rotation dtheta(t) of the attitude: db = dtheta x b. The constant part
-    # is a misalignment the 12 parameters absorb, so only its variation is modelled: orbit-phase
-    # harmonics 1 and 2 plus a linear trend, for each of the three rotation axes.
-    phase = data.orbit_phase_rad
-    tau = _tau_days(data, train)
-    funcs = {
-        "cos1": np.cos(phase),
-        "sin1": np.sin(phase),
-        "cos2": np.cos(2 * phase),
-        "sin2": np.sin(2 * phase),
-        "trend_per_day": tau,
-    }
+#: Periods scanned for the attitude-error sinusoids [s] (log-spaced), and how many are kept.
+ATTITUDE_PERIODS_S = np.geomspace(1200.0, 30000.0, 160)
+ATTITUDE_MAX_TERMS = 3
+
+
+def _calibration_residual(data: DiagnosisData, train: BoolArray) -> FloatArray:
+    """Residual of the per-axis 12-parameter least-squares fit on ``train``, all samples [nT]."""
+    x = np.column_stack([data.b_ref_body_nt / FIELD_SCALE_NT, np.ones(data.n)])
+    coef = np.linalg.lstsq(x[train], data.b_raw_nt[train], rcond=None)[0]
+    return np.asarray(data.b_raw_nt - x @ coef)
+
+
+def _rotation_columns(data: DiagnosisData) -> FloatArray:
+    """e_k x B (k = x, y, z): field change of a small rotation about body axis k, (N, 3, 3)."""
     b = data.b_ref_body_nt
-    cols = []
+    return np.stack([np.cross(np.eye(3)[k], b) for k in range(3)], axis=2)
+
+
+def _design_attitude(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
+    # A slowly varying small rotation dtheta(t) of the attitude: db = dtheta x B. The constant part
+    # is a misalignment the 12 parameters absorb; the variation is a few sinusoids (thermal
+    # distortion, star-tracker errors) whose periods are found by a matching-pursuit scan of the
+    # training residual (periods shorter than 80 % of the training span).
+    t = data.t_utc_s - float(data.t_utc_s[train][0])
+    span = float(t[train][-1]) if np.any(train) else 0.0
+    periods = ATTITUDE_PERIODS_S[0.8 * span > ATTITUDE_PERIODS_S]
+    if periods.size == 0:
+        return None
+    rot = _rotation_columns(data) * 1e-3  # per mrad
+    resid = _calibration_residual(data, train)[train].reshape(-1)
+    chosen: list[float] = []
+    tt = t[train]
+    rt = rot[train]
+    q_fixed = np.zeros((resid.size, 0))
+    for _ in range(ATTITUDE_MAX_TERMS):
+        r_now = resid - q_fixed @ (q_fixed.T @ resid)
+        best_gain, best_period, best_cols = 0.0, 0.0, np.zeros((resid.size, 0))
+        for period in periods:
+            if any(abs(period / c - 1.0) < 0.05 for c in chosen):
+                continue
+            w = 2 * np.pi / period
+            cols = np.concatenate(
+                [rt * np.cos(w * tt)[:, None, None], rt * np.sin(w * tt)[:, None, None]], axis=2
+            ).reshape(-1, 6)
+            cols = cols - q_fixed @ (q_fixed.T @ cols)
+            gram = cols.T @ cols
+            rhs = cols.T @ r_now
+            try:
+                gain = float(rhs @ np.linalg.solve(gram + 1e-9 * np.trace(gram) * np.eye(6), rhs))
+            except np.linalg.LinAlgError:
+                continue
+            if gain > best_gain:
+                best_gain, best_period, best_cols = gain, float(period), cols
+        if best_gain <= 0.0:
+            break
+        chosen.append(best_period)
+        q_new, _ = np.linalg.qr(best_cols)
+        q_fixed = np.concatenate([q_fixed, q_new], axis=1)
+    if not chosen:
+        return None
+    cols_all = []
     names = []
-    for k, axis in enumerate("xyz"):
-        e = np.zeros(3)
-        e[k] = 1.0
-        cross = np.cross(e, b)  # d(theta_k) e_k x b  [nT per rad]
-        for fname, f in funcs.items():
-            cols.append(cross * f[:, None] * 1e-3)
-            names.append(f"dtheta_{axis}_{fname}_mrad")
-    return DesignBlock(np.stack(cols, axis=2), names)
+    for period in chosen:
+        w = 2 * np.pi / period
+        for fname, f in (("cos", np.cos(w * t)), ("sin", np.sin(w * t))):
+            for k, axis in enumerate("xyz"):
+                cols_all.append(rot[:, :, k] * f[:, None])
+                names.append(f"dtheta_{axis}_{fname}_{period:.0f}s_mrad")
+    return DesignBlock(
+        np.stack(cols_all, axis=2),
+        names,
+        variant="periods_s=" + ",".join(f"{p:.0f}" for p in chosen),
+    )
 
 
 CATALOGUE: tuple[Effect, ...] = (
@@ -612,14 +689,15 @@ CATALOGUE: tuple[Effect, ...] = (
     ),
     Effect(
         "field_aligned_currents",
-        "transverse field at high magnetic latitude (bumps in |magnetic latitude| > 58 deg, "
-        "magnetic east and the second direction perpendicular to B)",
+        "transverse field at high magnetic latitude: bumps in |magnetic latitude| > 58 deg along "
+        "magnetic east made perpendicular to B, modulated by magnetic local time (dawn/dusk)",
         "residual concentrated at |magnetic latitude| > 60 deg, perpendicular to B",
         _design_fac,
     ),
     Effect(
         "attitude_error",
-        "a slowly varying attitude error dtheta(t): db = dtheta x B (orbit harmonics + trend)",
+        "a slowly varying attitude error dtheta(t): db = dtheta x B, dtheta a sum of up to three "
+        "sinusoids with periods found on the training blocks",
         "vector residual perpendicular to B while the scalar residual stays clean",
         _design_attitude,
         absorbed_by_calibration=True,
