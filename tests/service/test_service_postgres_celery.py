@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest_services import require_service
+from pydantic import SecretStr
 from service_helpers import ADMIN_KEY, live_server, pg_schema_url, wait_job, wait_versions
 from service_worlds import SENSOR_A, SENSOR_B, SWARM_A_TLE, T0_UTC_S, world
 
@@ -71,7 +72,7 @@ def test_end_to_end_on_postgresql_with_celery(broker: str, tmp_path: Path) -> No
     with pg_schema_url() as url:
         settings = Settings(
             database_url=url,
-            admin_key=ADMIN_KEY,
+            admin_key=SecretStr(ADMIN_KEY),
             job_backend="celery",
             broker_url=broker_url,
             queue=queue,
