@@ -233,6 +233,7 @@ def test_effect_specs_and_errors() -> None:
         "t_ref_c": 15,
     }
     assert parse_effect_spec("time_offset:offset_s=1.5").params == {"offset_s": 1.5}
+    assert parse_effect_spec("time_offset:magnitude=4").params == {"offset_s": 2.0}
     assert parse_effect_spec("nonlinearity:cubic_per_nt2=2e-12").params["cubic_per_nt2"] == [2e-12]
     with pytest.raises(ValueError, match="unknown effect 'wobble'"):
         parse_effect_spec("wobble")

@@ -504,16 +504,22 @@ def parse_effect_spec(spec: str, *, read_file: Callable[[str], str] | None = Non
     """``NAME[:k=v,k=v,...]`` → an effect (the ``--effect`` option of ``orbitcal simulate``).
 
     Values are numbers, ``a/b/c`` for vectors (or 9 numbers for a 3×3 matrix, row by row), or
-    text; ``true_tle=@path`` reads a file through ``read_file``.
+    text; ``true_tle=@path`` reads a file through ``read_file``. The reserved key
+    ``magnitude=K`` multiplies the effect's size (:meth:`Effect.scaled`), e.g.
+    ``time_offset:magnitude=4`` is a 2 s offset.
     """
     name, _, rest = spec.partition(":")
     params: dict[str, Any] = {}
+    magnitude = 1.0
     for item in filter(None, (p.strip() for p in rest.split(","))):
         key, eq, value = item.partition("=")
         if not eq:
             raise ValueError(f"effect parameter {item!r} must be written key=value")
-        if value.startswith("@") and read_file is not None:
+        if key.strip() == "magnitude":
+            magnitude = float(value)
+        elif value.startswith("@") and read_file is not None:
             params[key.strip()] = read_file(value[1:])
         else:
             params[key.strip()] = _parse_value(value)
-    return make_effect(name.strip(), **params)
+    effect = make_effect(name.strip(), **params)
+    return effect.scaled(magnitude) if magnitude != 1.0 else effect
