@@ -45,7 +45,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         default=[],
         metavar="NAME[:k=v,...]",
         help=f"inject an effect (repeatable): {', '.join(EFFECT_NAMES)}; vectors as a/b/c, "
-        "true_tle=@FILE reads a file",
+        "true_tle=@FILE reads a file, magnitude=K scales the default size",
     )
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument(
