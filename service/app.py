@@ -23,6 +23,7 @@ from service.logs import configure_logging, redact_url
 from service.metrics import Metrics
 from service.routes import calibrations, dashboard, jobs, keys, ops, spacecraft, telemetry
 from service.scheduler import FleetScheduler
+from service.schemas import ErrorPublic
 from service.settings import Settings
 from service.storage import hash_key, make_engine, upgrade
 
@@ -143,6 +144,18 @@ def create_app(
         version=orbitcal.__version__,
         summary="On-orbit magnetometer calibration: telemetry ingest, retraining, calibrations.",
         lifespan=lifespan,
+        # Answers every route may give, documented once (their body is ErrorPublic, not
+        # FastAPI's default HTTPValidationError): found by tests/reliability/test_fuzz_openapi.py.
+        responses={
+            400: {"model": ErrorPublic, "description": "unreadable body"},
+            401: {"model": ErrorPublic, "description": "missing, unknown or revoked X-API-Key"},
+            422: {"model": ErrorPublic, "description": "invalid parameter or body field"},
+            503: {
+                "model": ErrorPublic,
+                "description": "database unavailable; nothing was stored",
+                "headers": {"Retry-After": {"schema": {"type": "integer"}}},
+            },
+        },
     )
     app.state.settings = settings
     app.state.admin_key_hash = (
