@@ -48,6 +48,7 @@ __all__ = [
     "JobRunner",
     "code_version",
     "create_job",
+    "reap_abandoned",
     "recover_interrupted",
     "run_retrain",
     "samples_to_telemetry",
@@ -402,6 +403,50 @@ def run_retrain(
     if on_done is not None:
         on_done(status, elapsed)
     return status
+
+
+def reap_abandoned(engine: Engine, *, timeout_s: float) -> list[str]:
+    """Fail ``running`` jobs whose lock is older than ``timeout_s`` (their worker died) and
+    release those locks. Returns the ids of the jobs failed."""
+    from service.storage import RetrainLock
+
+    cutoff = time.time() - timeout_s
+    with write_tx(engine) as conn:
+        stale = (
+            conn.execute(
+                sa.select(Job.id)
+                .join(RetrainLock, RetrainLock.job_id == Job.id)
+                .where(Job.status == "running", RetrainLock.acquired_at < cutoff)
+            )
+            .scalars()
+            .all()
+        )
+        orphans = (
+            conn.execute(
+                sa.select(Job.id).where(
+                    Job.status == "running",
+                    Job.started_at < cutoff,
+                    ~sa.exists().where(RetrainLock.job_id == Job.id),
+                )
+            )
+            .scalars()
+            .all()
+        )
+        ids = [*stale, *orphans]
+        if ids:
+            conn.execute(
+                sa.update(Job)
+                .where(Job.id.in_(ids))
+                .values(
+                    status="failed",
+                    error=f"abandoned: no progress for {timeout_s:g} s (worker lost)",
+                    finished_at=time.time(),
+                )
+            )
+            conn.execute(sa.delete(RetrainLock).where(RetrainLock.job_id.in_(ids)))
+    if ids:
+        log.warning("abandoned jobs failed", extra={"jobs": ids})
+    return list(ids)
 
 
 def recover_interrupted(engine: Engine) -> list[str]:

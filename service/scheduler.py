@@ -2,7 +2,8 @@
 
 Every ``scheduler_tick_s`` it creates a retraining job for each spacecraft whose cadence has elapsed
 since its last job and that has received at least ``min_new_samples`` since then (per-spacecraft
-overrides in ``spacecraft.schedule``), and re-submits jobs left queued (e.g. while the broker was
+overrides in ``spacecraft.schedule``), fails jobs whose worker died (lock older than
+``lock_timeout_s``, lock released), and re-submits jobs left queued (e.g. while the broker was
 down; running a job twice is harmless, :func:`service.jobs.run_retrain` is idempotent).
 """
 
@@ -15,7 +16,7 @@ import sqlalchemy as sa
 from apscheduler.schedulers.background import BackgroundScheduler
 from sqlalchemy.engine import Engine
 
-from service.jobs import JobRunner, create_job
+from service.jobs import JobRunner, create_job, reap_abandoned
 from service.settings import Settings
 from service.storage import Job, Spacecraft, read_tx
 
@@ -61,6 +62,7 @@ class FleetScheduler:
         now = time.time()
         submitted: list[str] = []
         try:
+            reap_abandoned(self.engine, timeout_s=self.settings.lock_timeout_s)
             for pk in due_spacecraft(self.engine, self.settings, now=now):
                 job_id, created = create_job(self.engine, self.settings, pk, trigger="schedule")
                 if created:

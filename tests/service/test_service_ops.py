@@ -153,3 +153,36 @@ def test_migrations_downgrade_and_upgrade(tmp_path: Path) -> None:
     assert {"spacecraft", "samples", "calibrations", "jobs", "retrain_locks", "api_keys"} <= tables
     assert pk == ["spacecraft_pk", "t_utc_us"]
     engine.dispose()
+
+
+def test_scheduler_fails_jobs_of_a_lost_worker_and_releases_the_lock(tmp_path: Path) -> None:
+    from service.jobs import InlineRunner
+    from service.scheduler import FleetScheduler
+
+    settings = sqlite_settings(tmp_path, lock_timeout_s=60.0)
+    engine = make_engine(settings.database_url)
+    upgrade(engine)
+    old = time.time() - 120
+    with write_tx(engine) as conn:
+        conn.execute(
+            sa.insert(Spacecraft).values(
+                id="s", attitude_frame="GCRS", created_at=0, sample_count=0, samples_at_last_job=0
+            )
+        )
+        conn.execute(
+            sa.insert(Job).values(
+                id="c" * 32, spacecraft_pk=1, kind="retrain", trigger="api", status="running",
+                params={}, created_at=old, started_at=old,
+            )
+        )  # fmt: skip
+        conn.execute(
+            sa.insert(RetrainLock).values(spacecraft_pk=1, job_id="c" * 32, acquired_at=old)
+        )
+    runner = InlineRunner(engine, settings)
+    FleetScheduler(engine, settings, runner).tick()
+    runner.shutdown()
+    with engine.connect() as conn:
+        status, error = conn.execute(sa.select(Job.status, Job.error)).one()
+        locks = conn.execute(sa.select(sa.func.count()).select_from(RetrainLock)).scalar()
+    assert status == "failed" and "worker lost" in str(error) and locks == 0
+    engine.dispose()
