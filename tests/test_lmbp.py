@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from orbitcal.calibrate import FitData, TooFewSamplesError, fit_method
+from orbitcal.calibrate import FitData, PoorCoverageError, TooFewSamplesError, fit_method
 from orbitcal.calibrate.document import calibration_from_document, calibration_to_document
 from orbitcal.calibrate.lmbp import BPNetwork, LMBPCalibration, NetworkProblem, fit_lmbp
 
@@ -87,3 +87,20 @@ def test_too_few_samples_and_warm_start_mismatch_are_rejected() -> None:
     cal = fit_lmbp(big, n_hidden=3, generator=torch.Generator().manual_seed(0))
     with pytest.raises(ValueError, match="architecture"):
         fit_lmbp(big, n_hidden=4, generator=torch.Generator().manual_seed(0), warm_start=cal)
+
+
+def test_on_orbit_variant_drops_constant_housekeeping_and_rejects_poor_coverage() -> None:
+    rng = np.random.default_rng(9)
+    data, _, _ = _affine_data(rng, 300)
+    x_hk = np.column_stack([rng.normal(20, 5, 300), np.ones(300)])  # a flag that never changes
+    data = FitData(
+        data.b_raw_nt, data.b_ref_body_nt, x_hk=x_hk, hk_names=["temperature", "hk_flag"]
+    )
+    cal = fit_lmbp(data, use_hk=True, generator=torch.Generator().manual_seed(3))
+    assert cal.hk_names == ["temperature"]
+    theta = np.linspace(0, 6 * np.pi, 300)
+    b_ref = np.column_stack([3e4 * np.cos(theta), 3e4 * np.sin(theta), np.full(300, 2e4)])
+    raw = b_ref + rng.normal(0, 5, b_ref.shape)
+    raw[:, 2] = 2e4  # the z axis never sees a change: unobservable
+    with pytest.raises(PoorCoverageError, match="condition number"):
+        fit_lmbp(FitData(raw, b_ref), use_hk=True, generator=torch.Generator().manual_seed(3))

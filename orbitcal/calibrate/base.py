@@ -80,6 +80,23 @@ class FitData:
     def n(self) -> int:
         return int(self.b_raw_nt.shape[0])
 
+    def without_constant_hk(self) -> FitData:
+        """The same data without housekeeping columns that do not vary (they carry no
+        information and would make the design singular)."""
+        assert self.x_hk is not None
+        if self.x_hk.shape[1] == 0:
+            return self
+        keep = np.ptp(self.x_hk, axis=0) > 0 if self.n else np.zeros(self.x_hk.shape[1], bool)
+        if bool(np.all(keep)):
+            return self
+        return FitData(
+            self.b_raw_nt,
+            self.b_ref_body_nt,
+            self.b_ref_mag_nt,
+            self.x_hk[:, keep],
+            [n for n, k in zip(self.hk_names, keep, strict=True) if k],
+        )
+
     def subset(self, mask: NDArray[np.bool_] | NDArray[np.int64]) -> FitData:
         """The same data restricted to ``mask`` (boolean or index array)."""
         return FitData(

@@ -92,13 +92,17 @@ def fit_linear(data: FitData, *, use_hk: bool = False) -> AffineCalibration:
     MissingAttitudeError, TooFewSamplesError, PoorCoverageError
     """
     method = "linear-hk" if use_hk else "linear"
-    fit_data = data if use_hk else FitData(data.b_raw_nt, data.b_ref_body_nt, data.b_ref_mag_nt)
+    fit_data = (
+        data.without_constant_hk()
+        if use_hk
+        else FitData(data.b_raw_nt, data.b_ref_body_nt, data.b_ref_mag_nt)
+    )
     X = _check(fit_data, method)
-    coef, *_ = np.linalg.lstsq(X, data.b_raw_nt, rcond=None)
+    coef, *_ = np.linalg.lstsq(X, fit_data.b_raw_nt, rcond=None)
     A: FloatArray = np.asarray(coef[:3].T, dtype=np.float64)
     b0: FloatArray = np.asarray(coef[3], dtype=np.float64)
     K: FloatArray = np.asarray(coef[4:].T, dtype=np.float64)
-    resid = data.b_raw_nt - X @ coef
+    resid = fit_data.b_raw_nt - X @ coef
     dof = max(1, X.shape[0] - X.shape[1])
     sigma = float(np.sqrt(np.sum(resid**2) / (3 * dof)))
     return AffineCalibration(

@@ -30,7 +30,13 @@ import torch
 from numpy.typing import NDArray
 
 from orbitcal.calibrate.base import Calibration, FitData, best_linear_approximation
-from orbitcal.calibrate.errors import DocumentError, MissingAttitudeError, TooFewSamplesError
+from orbitcal.calibrate.errors import (
+    DocumentError,
+    MissingAttitudeError,
+    PoorCoverageError,
+    TooFewSamplesError,
+)
+from orbitcal.calibrate.linear import CONDITION_LIMIT, equilibrated_condition_number
 from orbitcal.calibrate.lm import LMOptions, LMResult, levenberg_marquardt
 
 __all__ = [
@@ -435,6 +441,13 @@ def fit_lmbp(
     method = "lmbp-hk" if use_hk else "lmbp"
     if data.b_ref_body_nt is None:
         raise MissingAttitudeError(method)
+    b_ref: FloatArray = data.b_ref_body_nt
+    if use_hk:
+        data = data.without_constant_hk()
+        if warm_start is not None and warm_start.hk_names != data.hk_names:
+            raise ValueError(
+                f"warm start uses housekeeping {warm_start.hk_names}, the data {data.hk_names}"
+            )
     hk_names = list(data.hk_names) if use_hk else []
     x_in = (
         np.hstack([data.b_raw_nt, data.x_hk])
@@ -451,14 +464,18 @@ def fit_lmbp(
             raise ValueError(f"warm start architecture {warm_start.net} differs from {net}")
         in_scaler, out_scaler = warm_start.in_scaler, warm_start.out_scaler
     else:
-        in_scaler, out_scaler = MinMaxScaler.fit(x_in), MinMaxScaler.fit(data.b_ref_body_nt)
+        in_scaler, out_scaler = MinMaxScaler.fit(x_in), MinMaxScaler.fit(b_ref)
     u = torch.from_numpy(in_scaler.forward(x_in))
-    t = torch.from_numpy(out_scaler.forward(data.b_ref_body_nt))
+    t = torch.from_numpy(out_scaler.forward(b_ref))
     problem = NetworkProblem(net, u, t)
 
     linear_init = None
     if lin:
         U = torch.cat([u, torch.ones(u.shape[0], 1, dtype=torch.float64)], dim=1)
+        # the linear path must be identifiable: the same coverage test as the 12-parameter fit
+        cond = equilibrated_condition_number(U.numpy())
+        if not cond < CONDITION_LIMIT:
+            raise PoorCoverageError(method, cond, CONDITION_LIMIT)
         coef = torch.linalg.lstsq(U, t).solution  # (n_in + 1, 3)
         linear_init = (coef[:-1].T.contiguous(), coef[-1].clone())
 
