@@ -75,7 +75,10 @@ class LMOptions:
     target_mse
         Stop as soon as ``mean(r²) ≤ target_mse`` (e.g. the paper's 1e-3); ``None`` to disable.
     mu0
-        Initial relative damping ``μ`` (Marquardt-scaled: dimensionless).
+        Initial relative damping ``μ`` (dimensionless: it multiplies ``diag(D)``).
+    scaling
+        ``"marquardt"``: damp with ``μ·diag(D)``, ``D`` the running max of ``diag(JᵀJ)``
+        (Moré 1978); ``"levenberg"``: ``μ·max(D)·I`` (Levenberg 1944; Nielsen 1999 uses this).
     max_rejections
         Retries with a larger ``μ`` in one epoch before giving up ("damping").
     """
@@ -87,6 +90,7 @@ class LMOptions:
     target_mse: float | None = None
     mu0: float = 1e-3
     max_rejections: int = 30
+    scaling: Literal["marquardt", "levenberg"] = "marquardt"
 
 
 @dataclass
@@ -203,7 +207,10 @@ def levenberg_marquardt(
             stop = "gradient"
             break
         diag_max = torch.maximum(diag_max, torch.diagonal(JtJ))
-        scale = torch.clamp(diag_max, min=1e-12 * float(diag_max.max()) + 1e-300)
+        if opts.scaling == "marquardt":
+            scale = torch.clamp(diag_max, min=1e-12 * float(diag_max.max()) + 1e-300)
+        else:  # Levenberg: μ·I, μ relative to the largest curvature seen
+            scale = torch.full_like(diag_max, float(diag_max.max()))
         epochs += 1
         accepted = False
         for _ in range(opts.max_rejections):
