@@ -21,6 +21,7 @@ from service.auth import is_loopback
 from service.jobs import FitFunction, InlineRunner, JobRunner, recover_interrupted
 from service.logs import configure_logging, redact_url
 from service.metrics import Metrics
+from service.ratelimit import RateLimit
 from service.routes import calibrations, dashboard, jobs, keys, ops, spacecraft, telemetry
 from service.scheduler import FleetScheduler
 from service.schemas import ErrorPublic
@@ -150,6 +151,11 @@ def create_app(
             400: {"model": ErrorPublic, "description": "unreadable body"},
             401: {"model": ErrorPublic, "description": "missing, unknown or revoked X-API-Key"},
             422: {"model": ErrorPublic, "description": "invalid parameter or body field"},
+            429: {
+                "model": ErrorPublic,
+                "description": "per-key rate limit exceeded",
+                "headers": {"Retry-After": {"schema": {"type": "integer"}}},
+            },
             503: {
                 "model": ErrorPublic,
                 "description": "database unavailable; nothing was stored",
@@ -175,6 +181,10 @@ def create_app(
         log.warning("no ORBITCAL_ADMIN_KEY set: no key can be created until one is")
 
     app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
+    if settings.rate_limit_per_s > 0:  # outermost: a throttled caller costs no body read
+        app.add_middleware(
+            RateLimit, rate_per_s=settings.rate_limit_per_s, burst=settings.rate_limit_burst
+        )
 
     @app.exception_handler(HTTPException)
     async def _http_error(_request: Request, exc: HTTPException) -> JSONResponse:
