@@ -206,9 +206,9 @@ def sqlite_settings(db: Path, **overrides: Any) -> dict[str, Any]:
 class LiveServer:
     """uvicorn in a thread of the test process (for in-process fault injection and log capture)."""
 
-    def __init__(self, app: Any) -> None:
+    def __init__(self, app: Any, *, log_level: str = "warning") -> None:
         self.app = app
-        config = uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning", lifespan="on")
+        config = uvicorn.Config(app, host="127.0.0.1", port=0, log_level=log_level, lifespan="on")
         self.server = uvicorn.Server(config)
         self.thread = threading.Thread(target=self.server.run, daemon=True)
         self.url = ""
@@ -234,8 +234,10 @@ class LiveServer:
 
 
 @contextmanager
-def live_server(settings: Settings, **kwargs: Any) -> Iterator[LiveServer]:
-    server = LiveServer(create_app(settings, **kwargs)).start()
+def live_server(
+    settings: Settings, *, log_level: str = "warning", **kwargs: Any
+) -> Iterator[LiveServer]:
+    server = LiveServer(create_app(settings, **kwargs), log_level=log_level).start()
     try:
         yield server
     finally:
