@@ -209,6 +209,12 @@ class NetworkProblem:
         self.net = net
         self.u = u
         self.t = t
+        # index bookkeeping of normal_equations, computed once
+        self._vidx_cache = self._vidx()
+        self._perm_cache = self._perm()
+        self._rep = torch.repeat_interleave(torch.arange(net.n_hidden), net.n_in + 1)
+        self._ones = torch.ones(u.shape[0], 1, dtype=u.dtype)
+        self._ut = torch.cat([u, self._ones], dim=1)
 
     def residuals(self, params: torch.Tensor) -> torch.Tensor:
         return (self.net.forward(params, self.u) - self.t).reshape(-1)
@@ -237,14 +243,14 @@ class NetworkProblem:
         if net.linear_path:
             y = y + u @ p["L"].T
         r = y - self.t  # (N, No)
-        ones = torch.ones(N, 1, dtype=u.dtype)
-        ut = torch.cat([u, ones], dim=1)  # (N, Ni+1)
+        ones = self._ones
+        ut = self._ut  # (N, Ni+1)
         V = (dh.unsqueeze(2) * ut.unsqueeze(1)).reshape(N, H * (Ni + 1))
         Q = torch.cat([h, ones, u], dim=1) if net.linear_path else torch.cat([h, ones], dim=1)
         nq = Q.shape[1]
         W2 = p["W2"]
-        vidx, ns = self._vidx()
-        rep = torch.repeat_interleave(torch.arange(H), Ni + 1)  # hidden unit of each V column
+        vidx, ns = self._vidx_cache
+        rep = self._rep  # hidden unit of each V column
         VtV = V.T @ V
         shared = VtV * (W2.T @ W2)[rep][:, rep]
         VtQ = V.T @ Q  # (H(Ni+1), nq)
@@ -268,7 +274,7 @@ class NetworkProblem:
                 b = ns + k2 * nq
                 JtJ[a : a + nq, b : b + nq] = QtQ if k2 == k else 0.0
             Jtr[a : a + nq] = QtR[:, k]
-        perm = self._perm()
+        perm = self._perm_cache
         return r.reshape(-1), JtJ[perm][:, perm], Jtr[perm]
 
     def _vidx(self) -> tuple[torch.Tensor, int]:
