@@ -85,9 +85,20 @@ def apply_linear(document: dict[str, Any], b_raw_nt: np.ndarray) -> np.ndarray:
     return (np.asarray(b_raw_nt) - o) @ M.T
 
 
-def diagnose(telemetry: Telemetry, *, orbit: Any, attitude_frame: str) -> dict[str, Any]:
-    """The section-5 diagnosis report on ``telemetry``."""
-    from orbitcal.diagnose import diagnose as run  # type: ignore[attr-defined]
+def diagnose(
+    telemetry: Telemetry, *, orbit: Any, attitude_frame: str, field: str = "IGRF-14"
+) -> dict[str, Any]:
+    """The section-5 diagnosis report on ``telemetry`` (``ImportError`` if the build lacks it)."""
+    try:
+        from orbitcal.diagnose import diagnose as run  # type: ignore[attr-defined]
+    except ImportError:
+        from orbitcal.diagnose.api import diagnose as run  # type: ignore[import-not-found,no-redef]
 
-    report = run(telemetry, orbit=orbit, attitude_frame=attitude_frame)
+    report = run(
+        telemetry,
+        orbit=orbit,
+        field=field,
+        attitude_frame=attitude_frame,
+        rng=np.random.default_rng(0),
+    )
     return dict(report)

@@ -209,7 +209,10 @@ async def diagnosis(
                 return cache[key]
         try:
             report = science.diagnose(
-                tel, orbit=science.load_orbit(sc.tle, sc.omm), attitude_frame=sc.attitude_frame
+                tel,
+                orbit=science.load_orbit(sc.tle, sc.omm),
+                attitude_frame=sc.attitude_frame,
+                field=settings.reference_field,
             )
         except ImportError:
             raise HTTPException(
