@@ -291,6 +291,83 @@ def bench_case(name: str, n: int, hidden: int | None, *, seed: int, adam_cap_s: 
     return runs
 
 
+def findings() -> list[str]:
+    """Calibrator accuracy on a simulated real orbit (not timings): held-out rms per method and
+    the 12-parameter fit's Monte-Carlo spread against the Cramér–Rao bound."""
+    from orbitcal.calibrate.linear import cramer_rao_bound, design_matrix, fit_linear_batch
+    from orbitcal.orbit import Orbit
+    from orbitcal.pipeline import calibrate_telemetry
+    from orbitcal.reproduce.onorbit import orbit_world
+    from orbitcal.reproduce.wang2020 import PAPER, reproduce_wang2020
+
+    out = [
+        "",
+        "## Calibrator findings (accuracy, not speed)",
+        "",
+        "Swarm A TLE (CelesTrak, 2022-08-01), SGP4, IGRF-14, 2000 samples every 10 s (5.6 h), "
+        "σ = 5 nT, random fluxgate (3 % scale, 0.5° misalignment, 500 nT offsets); held-out = "
+        "the latest 25 % (`orbitcal.pipeline.calibrate_telemetry`). Vector methods: rms of "
+        "b_cal − B_ref over 3 components; scalar methods: rms of ‖b_cal‖ − |B_ref|.",
+        "",
+        "| world | linear | linear-hk | lmbp (paper, raw inputs) | lmbp-hk | twostep | flann "
+        "| online |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    methods = ["linear", "linear-hk", "lmbp", "lmbp-hk", "twostep", "flann", "online"]
+    for attitude in ("tumbling", "nadir"):
+        for effects in (False, True):
+            w = orbit_world(
+                attitude=attitude,
+                n_samples=2000,
+                noise_std_nt=5.0,
+                temperature=effects,
+                magnetorquer=effects,
+                rng=np.random.default_rng(42),
+            )
+            orbit = Orbit.from_tle(w.tle)
+            cells = []
+            for m in methods:
+                _, doc = calibrate_telemetry(
+                    w.telemetry, orbit=orbit, method=m, rng=np.random.default_rng(0)
+                )
+                cells.append(f"{doc['metrics']['holdout_rms_nt']:.2f}")
+            label = f"{attitude}{' + temperature + magnetorquer' if effects else ''}"
+            out.append(f"| {label} | " + " | ".join(cells) + " |")
+            print(out[-1], flush=True)
+    w = orbit_world(attitude="tumbling", n_samples=1500, rng=np.random.default_rng(11))
+    X = design_matrix(w.b_true_body_nt)
+    clean = w.b_true_body_nt @ w.a_matrix.T + w.bias_nt
+    runs, sigma = 400, 5.0
+    raw = clean[None] + np.random.default_rng(12).normal(0, sigma, (runs, *clean.shape))
+    A_hat, b0_hat = fit_linear_batch(X, raw)
+    crb = np.sqrt(np.diag(cramer_rao_bound(X, sigma)))
+    emp = np.concatenate([A_hat.std(0, ddof=1), b0_hat.std(0, ddof=1)[:, None]], 1)
+    ratio = emp / crb[None, :]
+    out += [
+        "",
+        f"12-parameter fit over {runs} Monte-Carlo runs (tumbling, 1500 samples, σ = 5 nT): "
+        f"empirical std / Cramér–Rao std per parameter, min {ratio.min():.3f}, "
+        f"max {ratio.max():.3f} (rows x, y, z; columns A_k1, A_k2, A_k3, b0_k):",
+        "",
+        "```",
+        np.array2string(ratio, precision=3),
+        "```",
+    ]
+    r = reproduce_wang2020()
+    t1 = dict(r.table1)
+    out += [
+        "",
+        "Wang et al. 2020 (`orbitcal reproduce wang2020`), paper vs orbitcal: Table 1 R for "
+        + ", ".join(f"H={h}: {PAPER['table1'][h]} vs {t1[h]:.5f}" for h in (7, 6, 5, 4, 3, 2))
+        + f" (on eq. 16's planar field H=2 gives {dict(r.table1_eq16)[2]:.5f}); "
+        f"LM epochs to MSE < 1e-3: 26 vs {r.lm_epochs_to_mse_1e3}; ground max error: < 10 vs "
+        f"{r.ground_max_error_nt:.2f} nT; after the t = 15 s change without retraining: ~30 vs "
+        f"{r.max_error_without_retraining_nt:.2f} nT; after periodic retraining: < 10 vs "
+        f"{r.max_error_after_retraining_nt:.2f} nT.",
+    ]
+    return out
+
+
 def machine() -> str:
     cpu = platform.processor() or "?"
     try:
@@ -317,6 +394,12 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--adam-cap-s", type=float, default=30.0)
     ap.add_argument("--out", type=Path, default=RESULTS)
+    ap.add_argument(
+        "--no-findings",
+        dest="findings",
+        action="store_false",
+        help="skip the calibrator-accuracy section (on-orbit comparison, CRB, Wang 2020)",
+    )
     args = ap.parse_args()
     torch.set_num_threads(1)
     lines = [
@@ -361,6 +444,8 @@ def main() -> None:
                 )
                 lines.append(line)
                 print(line, flush=True)
+    if args.findings:
+        lines += findings()
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text("\n".join(lines) + "\n", encoding="utf-8")
     print(f"wrote {args.out}")
