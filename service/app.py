@@ -51,6 +51,7 @@ class BodyLimit:
                                 "errors": [],
                             },
                             status_code=413,
+                            headers={"Connection": "close"},  # do not drain the body
                         )
                         await response(scope, receive, send)
                         return

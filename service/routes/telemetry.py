@@ -42,16 +42,27 @@ _BODY_DOC: dict[str, Any] = {
 }
 
 
+_CLOSE = {"Connection": "close"}
+
+
 async def _read_body(request: Request, limit: int) -> bytes:
     declared = request.headers.get("content-length")
     if declared is not None and declared.isdigit() and int(declared) > limit:
-        raise HTTPException(status_code=413, detail=f"body of {declared} bytes exceeds {limit}")
+        raise HTTPException(
+            status_code=413,
+            detail=f"body of {declared} bytes exceeds {limit}",
+            headers=_CLOSE,
+        )
     chunks: list[bytes] = []
     size = 0
     async for chunk in request.stream():
         size += len(chunk)
         if size > limit:
-            raise HTTPException(status_code=413, detail=f"body exceeds {limit} bytes")
+            # Connection: close makes the server drop the connection instead of draining the
+            # rest of an endless body (found by tests/reliability/test_bad_inputs.py: 1 GB read).
+            raise HTTPException(
+                status_code=413, detail=f"body exceeds {limit} bytes", headers=_CLOSE
+            )
         chunks.append(chunk)
     return b"".join(chunks)
 
