@@ -73,3 +73,34 @@ def test_periodic_retraining_recovers_after_a_parameter_change() -> None:
     assert np.sqrt(np.mean(stale**2)) > 4 * w.noise_std_nt
     assert np.sqrt(np.mean(after**2)) < 1.1 * w.noise_std_nt
     assert all(ev.n_samples > 100 for ev in retrainer.events)
+
+
+def test_online_rejects_degenerate_input() -> None:
+    import pytest
+
+    from orbitcal.calibrate import PoorCoverageError, TooFewSamplesError
+
+    theta = np.linspace(0, 4 * np.pi, 400)
+    b = np.column_stack([3e4 * np.cos(theta), 3e4 * np.sin(theta), np.full(400, 2e4)])
+    with pytest.raises(TooFewSamplesError, match="at least 20"):
+        fit_online(FitData(b[:5], None, np.linalg.norm(b[:5], axis=1)))
+    # a field turning about one axis only: the ellipsoid is not pinned down
+    with pytest.raises(PoorCoverageError):
+        fit_online(FitData(b + 400.0, None, np.full(400, 3.0e4)))
+
+
+def test_registry_names_and_public_api() -> None:
+    import orbitcal.calibrate as oc
+
+    assert set(oc.METHODS) == {
+        "linear",
+        "linear-hk",
+        "lmbp",
+        "lmbp-hk",
+        "twostep",
+        "flann",
+        "online",
+    }
+    assert {m for m, s in oc.METHODS.items() if not s.vector} == {"twostep", "flann", "online"}
+    assert oc.DEFAULT_METHOD in oc.METHODS
+    assert all(hasattr(oc, name) for name in oc.__all__)

@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 
 from orbitcal.calibrate.base import AffineCalibration, Calibration, FitData
 from orbitcal.calibrate.errors import PoorCoverageError, TooFewSamplesError
+from orbitcal.calibrate.linear import CONDITION_LIMIT
 
 __all__ = [
     "OnlineEllipsoid",
@@ -102,6 +103,7 @@ class OnlineEllipsoid:
     n_seen: int = 0
     mean_norm_nt: float = 0.0
     fixed_reference: bool = False
+    info: FloatArray = field(default_factory=lambda: np.zeros((10, 10)))
 
     def update(self, m_nt: FloatArray, b_ref_mag_nt: float | None = None) -> None:
         """Absorb one reading ``m`` (3,) [nT] with its reference magnitude [nT] (or, as in the
@@ -120,10 +122,21 @@ class OnlineEllipsoid:
         ref = self.mean_norm_nt if b_ref_mag_nt is None else float(b_ref_mag_nt)
         d = ellipsoid_features(m, scale_nt=self.scale_nt)[0]
         y = (ref / self.scale_nt) ** 2
+        self.info += np.outer(d, d)
         Pd = self.P @ d
         k = Pd / (self.forgetting + d @ Pd)
         self.eta = self.eta + k * (y - d @ self.eta)
         self.P = (self.P - np.outer(k, Pd)) / self.forgetting
+
+    def condition_number(self) -> float:
+        """Condition number of the samples' design ``D`` (column-equilibrated), from ``Σ d dᵀ``."""
+        k = 9 if self.fixed_reference else 10
+        S = self.info[:k, :k]
+        dg = np.sqrt(np.diag(S))
+        if np.any(dg == 0):
+            return float("inf")
+        w = np.linalg.eigvalsh(S / np.outer(dg, dg))
+        return float(np.sqrt(w[-1] / w[0])) if w[0] > 0 else float("inf")
 
     def calibration(self) -> AffineCalibration:
         """The current calibration (patent steps 9-10).
@@ -131,7 +144,11 @@ class OnlineEllipsoid:
         With the running-mean reference the fitted quadric is ``(m − X0)ᵀA(m − X0) = R̄² + X0ᵀAX0``
         (scaled units), so ``G`` is rescaled to give ``‖G (m − X0)‖ = R̄``.
         """
+        cond = self.condition_number()
+        if not cond < CONDITION_LIMIT:
+            raise PoorCoverageError("online", cond, CONDITION_LIMIT)
         cal = eta_to_calibration(self.eta, scale_nt=self.scale_nt)
+        cal.extra["condition_number"] = cond
         if self.fixed_reference:
             x0 = cal.o / self.scale_nt
             r2 = (self.mean_norm_nt / self.scale_nt) ** 2
