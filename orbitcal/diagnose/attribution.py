@@ -177,7 +177,8 @@ def fit_joint(
         try:
             theta = np.linalg.solve(normal, xw.T @ y)
         except np.linalg.LinAlgError:  # pragma: no cover - singular design
-            theta = np.linalg.lstsq(x * np.sqrt(w)[:, None], y * np.sqrt(w), rcond=None)[0]
+            sw = np.sqrt(w)
+            theta = np.asarray(np.linalg.lstsq(x * sw[:, None], y * sw, rcond=None)[0], float)
         r = y - x @ theta
         sigma = max(float(1.4826 * np.median(np.abs(r - np.median(r)))), 1e-6)
         if not robust or it == iterations - 1:
@@ -203,21 +204,32 @@ def fit_joint(
     )
 
 
-def _train_rss(data: DiagnosisData, train: BoolArray, blocks: Sequence[DesignBlock]) -> float:
+def _train_bic(data: DiagnosisData, train: BoolArray, blocks: Sequence[DesignBlock]) -> float:
+    """Bayesian information criterion of a plain least-squares fit on the training samples."""
     fit = fit_joint(data, train, blocks, robust=False)
     r = data.b_raw_nt[train] - fit.predict_nt(data)[train]
-    return float(np.sum(r**2))
+    n = r.size
+    k = 12 + sum(len(b.names) for b in blocks)
+    return float(n * np.log(max(float(np.sum(r**2)), 1e-300) / n) + k * np.log(n))
+
+
+def _bic(fit: JointFit, residual_nt: FloatArray, train: BoolArray) -> float:
+    """BIC of a fit from its residual on the training samples."""
+    n = 3 * int(train.sum())
+    rss = max(float(np.sum(residual_nt[train] ** 2)), 1e-300)
+    k = 12 + sum(len(b.names) for b in fit.blocks)
+    return float(n * np.log(rss / n) + k * np.log(n))
 
 
 def _resolve(
     data: DiagnosisData, train: BoolArray, fixed: Sequence[DesignBlock], block: DesignBlock
 ) -> DesignBlock:
-    """Pick among a block's alternatives by the training residual (never the held-out one)."""
+    """Pick among a block's alternatives by the training BIC (never the held-out data)."""
     if not block.alternatives:
         return block
     options = [block, *block.alternatives]
-    rss = [_train_rss(data, train, [*fixed, opt]) for opt in options]
-    return options[int(np.argmin(rss))]
+    bic = [_train_bic(data, train, [*fixed, opt]) for opt in options]
+    return options[int(np.argmin(bic))]
 
 
 @dataclass(frozen=True)
@@ -352,11 +364,16 @@ def _chunk_test(r_before: FloatArray, r_after: FloatArray, n_chunks: int) -> tup
     return float(res.pvalue), mean
 
 
-def _support(block: DesignBlock) -> BoolArray:
-    """Samples where an effect's regressors are not negligible (all, for global effects)."""
-    mag = np.max(np.abs(block.g), axis=(1, 2))
-    peak = float(np.max(mag, initial=0.0))
-    return np.asarray(mag > 1e-2 * peak) if peak > 0 else np.ones(mag.shape, dtype=bool)
+def _support(fit: JointFit, train: BoolArray, holdout: BoolArray, n_chunks: int) -> BoolArray:
+    """Held-out samples where the candidate's fitted field matters (> 10 % of its training peak).
+
+    Localised effects (field-aligned currents, a patchy crust) are tested where they act; the
+    support depends on positions and the training fit only, never on held-out residuals.
+    """
+    mag = np.linalg.norm(fit.effect_nt(len(fit.blocks) - 1), axis=1)
+    peak = float(np.percentile(mag[train], 99)) if np.any(train) else 0.0
+    sup = holdout & (mag > 0.1 * peak)
+    return sup if int(sup.sum()) >= 3 * n_chunks else holdout
 
 
 def _params(fit: JointFit, k: int) -> dict[str, Any]:
@@ -374,9 +391,10 @@ def attribute(
     n_blocks: int = 10,
     holdout_blocks: int = 3,
     n_chunks: int = 16,
-    alpha: float = 0.01,
+    alpha: float = 0.05,
     min_gain: float = 0.03,
     max_steps: int = 3,
+    tie_tolerance: float = 0.01,
     robust: bool = True,
     split_tests: bool = True,
 ) -> Attribution:
@@ -398,6 +416,9 @@ def attribute(
         Minimum relative drop of the held-out RMS for an effect to be named [-].
     max_steps : int
         At most this many effects are selected.
+    tie_tolerance : float
+        Candidates whose held-out RMS is within this fraction of the best are ranked by the BIC of
+        their training fit instead [-].
     robust : bool
         Huber-reweighted fits.
     split_tests : bool
@@ -431,7 +452,7 @@ def attribute(
     single: dict[str, tuple[JointFit, FloatArray, float, float]] = {}
     for name, block in designs.items():
         fit, r, rms = evaluate([], block)
-        sup = holdout & _support(fit.blocks[-1])
+        sup = _support(fit, train, holdout, n_chunks)
         p, _ = _chunk_test(r_base[sup], r[sup], n_chunks)
         single[name] = (fit, r, rms, p)
 
@@ -446,19 +467,24 @@ def attribute(
         if not remaining:
             break
         level = alpha / len(remaining)
-        best: tuple[str, JointFit, FloatArray, float, float] | None = None
+        passing: list[tuple[str, JointFit, FloatArray, float, float]] = []
         for name in remaining:
             if step == 1:
                 fit, r, rms, p = single[name]
             else:
                 fit, r, rms = evaluate(chosen_blocks, designs[name])
-                sup = holdout & _support(fit.blocks[-1])
+                sup = _support(fit, train, holdout, n_chunks)
                 p, _ = _chunk_test(current_r[sup], r[sup], n_chunks)
-            passes = p < level and rms < current_rms * (1.0 - min_gain)
-            if passes and (best is None or rms < best[3]):
-                best = (name, fit, r, rms, p)
-        if best is None:
+            if p < level and rms < current_rms * (1.0 - min_gain):
+                passing.append((name, fit, r, rms, p))
+        if not passing:
             break
+        # Lowest held-out RMS wins; candidates within ``tie_tolerance`` of it (near-equivalent
+        # models, e.g. a time-tag error and an along-track error under a steady spin) are
+        # separated by the Bayesian information criterion of the training fit.
+        best_rms = min(c[3] for c in passing)
+        tied = [c for c in passing if c[3] <= best_rms * (1.0 + tie_tolerance)]
+        best = min(tied, key=lambda c: _bic(c[1], c[2], train))
         name, fit, r, rms, p = best
         selected.append(name)
         chosen_blocks.append(fit.blocks[-1])

@@ -221,9 +221,40 @@ class DiagnosisData:
         return np.einsum("nji,nj->ni", self.rot_itrs_to_body, self.b_ref_body_nt)
 
     @cached_property
+    def body_rate_itrs_rad_s(self) -> FloatArray:
+        """Angular velocity of the body relative to ITRS, body axes [rad/s], shape (N, 3).
+
+        From the rotation between the neighbouring samples (log map, central where possible), so a
+        fast, steady spin is differentiated exactly rather than by chords.
+        """
+        from scipy.spatial.transform import Rotation
+
+        r = self.rot_itrs_to_body
+        t = self.t_utc_s
+        out = np.zeros((self.n, 3))
+        for seg in _segments(t):
+            idx = np.arange(seg.start, seg.stop)
+            if idx.size < 2:
+                continue
+            lo = np.concatenate([idx[:1], idx[:-2], idx[-2:-1]])
+            hi = np.concatenate([idx[1:2], idx[2:], idx[-1:]])
+            rel = np.einsum("nij,nkj->nik", r[hi], r[lo])  # R(hi) R(lo)^T, body axes
+            rotvec = Rotation.from_matrix(rel).as_rotvec()
+            out[idx] = rotvec / (t[hi] - t[lo])[:, None]
+        return out
+
+    @cached_property
     def db_ref_body_dt_nt_s(self) -> FloatArray:
-        """Time derivative of the reference field seen in the body frame [nT/s]."""
-        return _time_derivative(self.t_utc_s, self.b_ref_body_nt)
+        """Time derivative of the reference field seen in the body frame [nT/s].
+
+        ``d(R b_itrs)/dt = w x (R b_itrs) + R d(b_itrs)/dt`` with the body rate ``w`` from the
+        attitude (exact for a steady spin) and the Earth-fixed field differenced along the track.
+        """
+        db_itrs = _time_derivative(self.t_utc_s, self.b_ref_itrs_nt)
+        return np.asarray(
+            np.cross(self.body_rate_itrs_rad_s, self.b_ref_body_nt)
+            + np.einsum("nij,nj->ni", self.rot_itrs_to_body, db_itrs)
+        )
 
     @cached_property
     def speed_itrs_km_s(self) -> FloatArray:
@@ -461,12 +492,14 @@ def _design_sun(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
         if data.illumination is not None
         else np.asarray(data.sunlit, dtype=float)
     )
-    if not (0.02 < float(np.mean(lit[train])) < 0.98):
-        return None
-    cols = [lit] + [lit * data.sun_body[:, k] for k in range(3)]
-    names = [f"sunlit_offset_{a}_nt" for a in "xyz"]
+    cols = [lit * data.sun_body[:, k] for k in range(3)]
+    names = []
     for k in "xyz":
         names += [f"sun_{k}_to_{a}_nt" for a in "xyz"]
+    if 0.02 < float(np.mean(lit[train] > 0.5)) < 0.98:
+        # With eclipses in the data the sunlit offset is separable from the calibration offset.
+        cols = [lit, *cols]
+        names = [f"sunlit_offset_{a}_nt" for a in "xyz"] + names
     return DesignBlock(_per_axis(cols), names)
 
 
@@ -486,8 +519,12 @@ def _design_nonlinearity(data: DiagnosisData, train: BoolArray) -> DesignBlock |
 def _design_orbit(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
     grad = data.db_ref_body_ds_nt_km
     tau = _tau_days(data, train)
-    g = np.stack([grad, grad * tau[:, None]], axis=2)
-    return DesignBlock(g, ["along_track_km", "along_track_rate_km_per_day"])
+    growing = DesignBlock(
+        np.stack([grad, grad * tau[:, None]], axis=2),
+        ["along_track_km", "along_track_rate_km_per_day"],
+        variant="growing",
+    )
+    return DesignBlock(grad[:, :, None], ["along_track_km"], "constant", alternatives=(growing,))
 
 
 def _design_drift(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
@@ -518,8 +555,8 @@ def _design_drift(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
 
 
 #: Magnetic-latitude centres [deg] and width [deg] of the field-aligned-current basis bumps.
-FAC_CENTRES_DEG: tuple[float, ...] = (60.0, 65.0, 70.0, 75.0, 80.0)
-FAC_WIDTH_DEG = 3.5
+FAC_CENTRES_DEG: tuple[float, ...] = tuple(float(c) for c in np.arange(58.0, 82.0, 2.0))
+FAC_WIDTH_DEG = 1.5
 FAC_MIN_MLAT_DEG = 58.0
 
 
@@ -579,37 +616,79 @@ def _design_attitude(data: DiagnosisData, train: BoolArray) -> DesignBlock | Non
     if periods.size == 0:
         return None
     rot = _rotation_columns(data) * 1e-3  # per mrad
-    resid = _calibration_residual(data, train)[train].reshape(-1)
-    chosen: list[float] = []
     tt = t[train]
     rt = rot[train]
-    q_fixed = np.zeros((resid.size, 0))
+    n_tr = int(train.sum())
+    # Scan jointly with the calibration: project the 12 calibration columns out first.
+    x_cal = np.zeros((n_tr, 3, 12))
+    b_tr = data.b_ref_body_nt[train] / FIELD_SCALE_NT
+    for i in range(3):
+        x_cal[:, i, 3 * i : 3 * i + 3] = b_tr
+        x_cal[:, i, 9 + i] = 1.0
+    q_fixed, _ = np.linalg.qr(x_cal.reshape(-1, 12))
+    y = data.b_raw_nt[train].reshape(-1)
+    chosen: list[float] = []
+
+    def gain_of(period: float, r_now: FloatArray, q: FloatArray) -> tuple[float, FloatArray]:
+        w = 2 * np.pi / period
+        cols = np.concatenate(
+            [rt * np.cos(w * tt)[:, None, None], rt * np.sin(w * tt)[:, None, None]], axis=2
+        ).reshape(-1, 6)
+        cols = cols - q @ (q.T @ cols)
+        gram = cols.T @ cols
+        rhs = cols.T @ r_now
+        try:
+            g = float(rhs @ np.linalg.solve(gram + 1e-9 * np.trace(gram) * np.eye(6), rhs))
+        except np.linalg.LinAlgError:
+            return 0.0, cols
+        return g, cols
+
     for _ in range(ATTITUDE_MAX_TERMS):
-        r_now = resid - q_fixed @ (q_fixed.T @ resid)
-        best_gain, best_period, best_cols = 0.0, 0.0, np.zeros((resid.size, 0))
+        r_now = y - q_fixed @ (q_fixed.T @ y)
+        best_gain, best_period = 0.0, 0.0
         for period in periods:
             if any(abs(period / c - 1.0) < 0.05 for c in chosen):
                 continue
-            w = 2 * np.pi / period
-            cols = np.concatenate(
-                [rt * np.cos(w * tt)[:, None, None], rt * np.sin(w * tt)[:, None, None]], axis=2
-            ).reshape(-1, 6)
-            cols = cols - q_fixed @ (q_fixed.T @ cols)
-            gram = cols.T @ cols
-            rhs = cols.T @ r_now
-            try:
-                gain = float(rhs @ np.linalg.solve(gram + 1e-9 * np.trace(gram) * np.eye(6), rhs))
-            except np.linalg.LinAlgError:
-                continue
-            if gain > best_gain:
-                best_gain, best_period, best_cols = gain, float(period), cols
+            g, _ = gain_of(float(period), r_now, q_fixed)
+            if g > best_gain:
+                best_gain, best_period = g, float(period)
         if best_gain <= 0.0:
             break
+        # Refine the period on a fine grid (+-2.5 %): phase errors grow over the held-out span.
+        for period in best_period * np.linspace(0.975, 1.025, 51):
+            g, _ = gain_of(float(period), r_now, q_fixed)
+            if g > best_gain:
+                best_gain, best_period = g, float(period)
         chosen.append(best_period)
+        _, best_cols = gain_of(best_period, r_now, q_fixed)
         q_new, _ = np.linalg.qr(best_cols)
         q_fixed = np.concatenate([q_fixed, q_new], axis=1)
     if not chosen:
         return None
+    # Cyclic refinement: re-fit each period with the others fixed (close periods that one
+    # training span cannot resolve at once are separated this way).
+    q_cal = q_fixed[:, :12]
+
+    def basis(periods_s: list[float]) -> FloatArray:
+        q = q_cal
+        for p in periods_s:
+            _, cols = gain_of(p, np.zeros(resid_size), q)
+            qn, _ = np.linalg.qr(cols)
+            q = np.concatenate([q, qn], axis=1)
+        return q
+
+    resid_size = y.size
+    for _ in range(2):
+        for j in range(len(chosen)):
+            others = chosen[:j] + chosen[j + 1 :]
+            q_o = basis(others)
+            r_now = y - q_o @ (q_o.T @ y)
+            best_gain, best_period = -1.0, chosen[j]
+            for period in chosen[j] * np.linspace(0.94, 1.06, 61):
+                g, _ = gain_of(float(period), r_now, q_o)
+                if g > best_gain:
+                    best_gain, best_period = g, float(period)
+            chosen[j] = best_period
     cols_all = []
     names = []
     for period in chosen:

@@ -1,0 +1,201 @@
+"""Where the gap lies: the residual by axis, vector vs scalar, region, condition and time.
+
+All statistics are of a residual ``r = b_raw - (A b_ref + o)`` (sensor axes ~ body axes) [nT]:
+by default the 12-parameter calibration fitted on the training blocks, evaluated on every sample,
+so the bands cover the whole ground track; ``axis_rms_nt`` and the vector/scalar split are given on
+the held-out blocks as in CONTRACT section 5.
+
+* *scalar* residual: the component along the reference field, what an attitude-free (|B|) check
+  sees; *perpendicular*: the rest, where attitude errors and field-aligned currents live.
+* magnetic latitude: centred dipole (:func:`orbitcal.diagnose.effects.magnetic_latitude_deg`).
+* local time: mean solar local time from longitude and UTC [h].
+* orbit phase: argument-of-latitude-like phase from the track [deg].
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from orbitcal.diagnose.effects import DiagnosisData
+
+__all__ = ["MLAT_BANDS_DEG", "local_time_h", "where_analysis"]
+
+FloatArray = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
+
+#: |magnetic latitude| bands [deg].
+MLAT_BANDS_DEG: tuple[tuple[float, float], ...] = (
+    (0.0, 30.0),
+    (30.0, 50.0),
+    (50.0, 60.0),
+    (60.0, 70.0),
+    (70.0, 90.0),
+)
+
+
+def local_time_h(t_utc_s: FloatArray, r_itrs_km: FloatArray) -> FloatArray:
+    """Mean solar local time [h] in [0, 24): UTC hour plus east longitude / 15."""
+    lon_deg = np.degrees(np.arctan2(r_itrs_km[:, 1], r_itrs_km[:, 0]))
+    return np.asarray(np.mod((t_utc_s % 86400.0) / 3600.0 + lon_deg / 15.0, 24.0))
+
+
+def _rms(x: FloatArray) -> float:
+    return float(np.sqrt(np.mean(np.sum(x**2, axis=-1)))) if x.size else float("nan")
+
+
+def _rms1(x: FloatArray) -> float:
+    return float(np.sqrt(np.mean(x**2))) if x.size else float("nan")
+
+
+def _split(r: FloatArray, b_hat: FloatArray) -> tuple[FloatArray, FloatArray]:
+    par = np.sum(r * b_hat, axis=1)
+    perp = r - par[:, None] * b_hat
+    return par, perp
+
+
+def _stats(r: FloatArray, b_hat: FloatArray, mask: BoolArray) -> dict[str, float | int]:
+    par, perp = _split(r[mask], b_hat[mask])
+    return {
+        "n": int(mask.sum()),
+        "rms_nt": round(_rms(r[mask]), 3),
+        "scalar_rms_nt": round(_rms1(par), 3),
+        "perpendicular_rms_nt": round(_rms(perp), 3),
+    }
+
+
+def _dominant_periods(
+    t_s: FloatArray, r: FloatArray, *, n_peaks: int = 3
+) -> list[dict[str, float]]:
+    """Strongest periods [s] of the residual (resampled, Hann window) and amplitudes [nT]."""
+    if t_s.size < 16:
+        return []
+    step = float(np.median(np.diff(t_s)))
+    grid = np.arange(t_s[0], t_s[-1], step)
+    out: list[dict[str, float]] = []
+    spec_total = np.zeros(grid.size // 2 + 1)
+    for k in range(3):
+        y = np.interp(grid, t_s, r[:, k])
+        y = (y - y.mean()) * np.hanning(y.size)
+        spec_total += np.abs(np.fft.rfft(y)) ** 2
+    freqs = np.fft.rfftfreq(grid.size, step)
+    spec = spec_total.copy()
+    spec[:2] = 0.0  # drop the mean and the record-length trend
+    norm = 2.0 / max(np.sum(np.hanning(grid.size)), 1e-12)
+    for _ in range(n_peaks):
+        i = int(np.argmax(spec))
+        if spec[i] <= 0:
+            break
+        out.append(
+            {
+                "period_s": round(float(1.0 / freqs[i]), 1),
+                "amplitude_nt": round(float(np.sqrt(spec[i]) * norm), 3),
+            }
+        )
+        spec[max(0, i - 2) : i + 3] = 0.0
+    return out
+
+
+def where_analysis(
+    data: DiagnosisData,
+    residual_nt: FloatArray,
+    *,
+    holdout: BoolArray,
+    n_time_blocks: int = 10,
+) -> dict[str, Any]:
+    """Where the residual lies (the ``where`` object of the CONTRACT section-5 report).
+
+    Parameters
+    ----------
+    data : DiagnosisData
+    residual_nt : ndarray, shape (N, 3)
+        Residual per sample, sensor axes [nT].
+    holdout : ndarray of bool, shape (N,)
+        Held-out samples (``axis_rms_nt`` and the vector/scalar split are computed there).
+    n_time_blocks : int
+        Equal-duration blocks for the time series.
+
+    Returns
+    -------
+    dict
+        ``axis_rms_nt`` [x, y, z], ``vector_rms_nt``, ``scalar_rms_nt``,
+        ``perpendicular_rms_nt``, ``scalar_to_vector``, ``magnetic_latitude``, ``sunlit_eclipse``,
+        ``local_time``, ``orbit_phase``, ``time``, ``frequency``, ``concentration`` (the band and
+        condition holding the largest excess).
+    """
+    r = residual_nt
+    b_hat = data.b_hat_body
+    h = holdout
+    par_h, perp_h = _split(r[h], b_hat[h])
+    out: dict[str, Any] = {
+        "residual": "12-parameter calibration fitted on the training blocks",
+        "axis_rms_nt": [round(_rms1(r[h, k]), 3) for k in range(3)],
+        "vector_rms_nt": round(_rms(r[h]), 3),
+        "scalar_rms_nt": round(_rms1(par_h), 3),
+        "perpendicular_rms_nt": round(_rms(perp_h), 3),
+    }
+    out["scalar_to_vector"] = round(out["scalar_rms_nt"] / max(out["vector_rms_nt"], 1e-12), 4)
+
+    amlat = np.abs(data.mlat_deg)
+    bands: list[dict[str, Any]] = []
+    for lo, hi in MLAT_BANDS_DEG:
+        m = (amlat >= lo) & (amlat < hi if hi < 90 else amlat <= hi)
+        if m.any():
+            bands.append({"band_deg": [lo, hi], **_stats(r, b_hat, m)})
+    out["magnetic_latitude"] = bands
+
+    lit: BoolArray | None = None
+    if data.illumination is not None:
+        lit = np.asarray(data.illumination > 0.5)
+    elif data.sunlit is not None:
+        lit = np.asarray(data.sunlit, dtype=bool)
+    if lit is not None:
+        out["sunlit_eclipse"] = {
+            "sunlit": _stats(r, b_hat, lit),
+            "eclipse": _stats(r, b_hat, ~lit),
+        }
+
+    lt = local_time_h(data.t_utc_s, data.r_itrs_km)
+    out["local_time"] = [
+        {"hours": [a, a + 3], **_stats(r, b_hat, (lt >= a) & (lt < a + 3))}
+        for a in range(0, 24, 3)
+        if np.any((lt >= a) & (lt < a + 3))
+    ]
+    phase = np.degrees(data.orbit_phase_rad) % 360.0
+    out["orbit_phase"] = [
+        {"deg": [a, a + 45], **_stats(r, b_hat, (phase >= a) & (phase < a + 45))}
+        for a in range(0, 360, 45)
+        if np.any((phase >= a) & (phase < a + 45))
+    ]
+    t = data.t_utc_s
+    span = float(t[-1] - t[0]) or 1.0
+    block = np.minimum(((t - t[0]) / span * n_time_blocks).astype(int), n_time_blocks - 1)
+    out["time"] = [
+        {
+            "block": b,
+            "start_utc_s": float(t[block == b][0]),
+            "held_out": bool(np.all(h[block == b])),
+            **_stats(r, b_hat, block == b),
+        }
+        for b in range(n_time_blocks)
+        if np.any(block == b)
+    ]
+    out["frequency"] = _dominant_periods(t, r)
+
+    # Where is the excess? The band/condition whose mean square most exceeds the overall one.
+    overall = _rms(r) ** 2
+    candidates: list[tuple[float, str]] = []
+    for bnd in bands:
+        n_b = float(bnd["n"])
+        rms_b = float(bnd["rms_nt"])
+        lo_b, hi_b = bnd["band_deg"]
+        candidates.append((n_b * (rms_b**2 - overall), f"|mlat| {lo_b:g}-{hi_b:g} deg"))
+    if lit is not None:
+        for key in ("sunlit", "eclipse"):
+            st = out["sunlit_eclipse"][key]
+            candidates.append((float(st["n"]) * (float(st["rms_nt"]) ** 2 - overall), key))
+    best = max(candidates, default=(0.0, "everywhere"))
+    out["concentration"] = best[1] if best[0] > 0.1 * overall * r.shape[0] else "everywhere"
+    return out
