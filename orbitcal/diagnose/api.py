@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
-from orbitcal.diagnose.attribution import attribute
+from orbitcal.diagnose.attribution import Attribution, attribute
 from orbitcal.diagnose.effects import DiagnosisData
 from orbitcal.diagnose.report import build_report
 from orbitcal.diagnose.where import where_analysis
@@ -25,7 +25,14 @@ if TYPE_CHECKING:  # pragma: no cover
     from orbitcal.orbit import Propagator
     from orbitcal.telemetry import Telemetry
 
-__all__ = ["DEFAULT_CRUST_MODEL", "diagnose", "diagnosis_data", "rotation_itrs_to_body"]
+__all__ = [
+    "DEFAULT_CRUST_MODEL",
+    "diagnose",
+    "diagnose_data",
+    "diagnose_parts",
+    "diagnosis_data",
+    "rotation_itrs_to_body",
+]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -169,14 +176,14 @@ def diagnosis_data(
     )
 
 
-def diagnose_data(
+def diagnose_parts(
     data: DiagnosisData,
     *,
     rng: np.random.Generator | None = None,
     learned: bool = True,
     **attribute_options: Any,
-) -> dict[str, Any]:
-    """Run the diagnosis on prepared arrays; returns the section-5 report (a JSON-ready dict)."""
+) -> tuple[dict[str, Any], Attribution]:
+    """Run the diagnosis on prepared arrays: the section-5 report and the attribution behind it."""
     att = attribute(data, **attribute_options)
     where = where_analysis(data, att.baseline_residual_nt, holdout=att.holdout)
     learned_result = None
@@ -186,7 +193,18 @@ def diagnose_data(
         learned_result = learned_field_error(
             data, att.final_residual_nt, train=att.train, holdout=att.holdout, rng=rng
         )
-    return build_report(data, att, where, learned=learned_result)
+    return build_report(data, att, where, learned=learned_result), att
+
+
+def diagnose_data(
+    data: DiagnosisData,
+    *,
+    rng: np.random.Generator | None = None,
+    learned: bool = True,
+    **attribute_options: Any,
+) -> dict[str, Any]:
+    """Run the diagnosis on prepared arrays; returns the section-5 report (a JSON-ready dict)."""
+    return diagnose_parts(data, rng=rng, learned=learned, **attribute_options)[0]
 
 
 def diagnose(
