@@ -25,8 +25,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "calibrate",
         help="fit a magnetometer calibration and write its JSON document",
         description=(
-            "Fit a calibration on the earlier 75%% of the samples against the reference field "
-            "along the orbit, score it on the later 25%%, and write the calibration document "
+            "Fit a calibration on the earlier samples (75 % by default) against the reference "
+            "field along the orbit, score it on the later ones, and write the calibration document "
             f"(CONTRACT section 4). Methods: {methods}."
         ),
     )
