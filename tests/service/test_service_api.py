@@ -279,3 +279,47 @@ def test_settings_come_from_the_environment(monkeypatch: pytest.MonkeyPatch) -> 
     assert s.cadence_s == 60.0
     assert "k" * 40 not in repr(s)
     assert json.dumps(s.model_dump(mode="json")).count("k" * 40) == 0
+
+
+SWARM_A_OMM = {  # the same element set as service_worlds.SWARM_A_TLE, CelesTrak JSON OMM keys
+    "OBJECT_NAME": "SWARM A",
+    "OBJECT_ID": "2013-067B",
+    "EPOCH": "2022-08-01T12:28:23.701728",
+    "MEAN_MOTION": 15.32769581,
+    "ECCENTRICITY": 0.0002354,
+    "INCLINATION": 87.3611,
+    "RA_OF_ASC_NODE": 208.4349,
+    "ARG_OF_PERICENTER": 100.1496,
+    "MEAN_ANOMALY": 260.0021,
+    "EPHEMERIS_TYPE": 0,
+    "CLASSIFICATION_TYPE": "U",
+    "NORAD_CAT_ID": 39452,
+    "ELEMENT_SET_NO": 999,
+    "REV_AT_EPOCH": 48883,
+    "BSTAR": 5.0768e-05,
+    "MEAN_MOTION_DOT": 1.645e-05,
+    "MEAN_MOTION_DDOT": 0.0,
+}
+
+
+def test_orbit_is_set_by_tle_or_omm_and_validated(server: LiveServer) -> None:
+    from service_worlds import SWARM_A_TLE
+
+    with server.client() as c:
+        assert c.post("/v1/spacecraft", json={"id": "sat-1", "tle": SWARM_A_TLE}).status_code == 201
+        r = c.put("/v1/spacecraft/sat-1/orbit", json={"omm": SWARM_A_OMM})
+        assert r.status_code == 200, r.text
+        assert r.json()["orbit"] == "omm"
+        r = c.put("/v1/spacecraft/sat-1/orbit", json={"tle": SWARM_A_TLE})
+        assert r.status_code == 200 and r.json()["orbit"] == "tle"
+        bad = SWARM_A_TLE[:-1] + "0"  # wrong checksum on line 2
+        r = c.put("/v1/spacecraft/sat-1/orbit", json={"tle": bad})
+        assert r.status_code == 422 and r.json()["errors"][0]["field"] == "tle"
+        assert "checksum" in r.json()["detail"].lower()
+        r = c.put("/v1/spacecraft/sat-1/orbit", json={"omm": {"EPOCH": "x"}})
+        assert r.status_code == 422 and r.json()["errors"][0]["field"] == "omm"
+        r = c.put("/v1/spacecraft/sat-1/orbit", json={})
+        assert r.status_code == 422
+        r = c.put("/v1/spacecraft/nope/orbit", json={"tle": SWARM_A_TLE})
+        assert r.status_code == 404
+        assert c.get("/v1/spacecraft/sat-1").json()["tle"] == SWARM_A_TLE
