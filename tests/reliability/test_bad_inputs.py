@@ -213,6 +213,34 @@ def test_unreadable_uploads_are_refused_whole_and_store_nothing(
     assert _stored(db) == before
 
 
+@pytest.mark.parametrize(
+    "prefix", [b"null\n", b"\xef\xbb\xbfnull\n", b"\r\n null\nnullx\n"], ids=["null", "bom", "two"]
+)
+def test_ndjson_starting_with_null_is_a_row_error_not_a_crash(
+    server: tuple[LiveServer, Path], prefix: bytes
+) -> None:
+    # This body used to kill the API process (pyarrow's JSON reader segfaults on it).
+    s, db = server
+    t0 = T0_UTC_S + 4e6 + 100 * len(prefix)
+    lines = [f'{{"time": {t0 + i!r}, "b_x": 1.0, "b_y": 2.0, "b_z": 3.0}}' for i in range(3)]
+    n_null = prefix.count(b"null")
+    before = _stored(db)
+    r = _post(s, prefix + "\n".join(lines).encode(), {"content-type": "application/x-ndjson"})
+    assert r.status_code == 200, r.text
+    assert r.json()["accepted"] == 3
+    assert [e["row"] for e in r.json()["rejected"]] == list(range(n_null))
+    assert "JSON" in r.json()["rejected"][0]["reason"]
+    assert _stored(db) == before + 3
+    r = _post(s, b"null", {"content-type": "application/x-ndjson"})
+    assert r.json() == {
+        "accepted": 0,
+        "duplicates": 0,
+        "rejected": [{"row": 0, "reason": "line is not a JSON object"}],
+    }
+    with s.client() as http:
+        assert http.get("/healthz").status_code == 200
+
+
 def test_unknown_spacecraft_is_404_before_reading_the_body(server: tuple[LiveServer, Path]) -> None:
     s, _ = server
     r = _post(s, "\n".join([HEADER, *_good(T0_UTC_S, 2)]), CSV, sc="nobody")
