@@ -1,0 +1,385 @@
+"""Bounded load test of the service on loopback: mixed ingest and reads from many clients.
+
+``orbitcal serve`` runs in its own process on an SQLite file (the embedded default). Before the
+load, a few spacecraft are registered, given calibratable telemetry and retrained once, so every
+read has something to answer. Then ``--clients`` concurrent closed-loop clients (asyncio + httpx,
+one connection each) run for ``--duration`` seconds; each request is an ingest of a 100-sample
+CSV batch with fresh times (share ``--ingest-share``) or one of four reads: the calibration in
+service, the version history, the spacecraft, the job list entry of the first retraining.
+The server's RSS (psutil) is sampled every 0.5 s.
+
+Reported: throughput (requests/s, ingested samples/s), latency p50/p99 per kind, errors (any
+answer other than the expected 200, or no answer), RSS over time and its growth between the
+first and the last third of the run (after a warm-up).
+
+Usage: ``python benchmarks/load.py [--duration 300] [--clients 50] [--out FILE.md]`` (default
+``benchmarks/results/load.md``).
+The test suite runs the same code for ~12 s (``tests/reliability/test_load.py``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import os
+import platform
+import secrets
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import httpx
+import numpy as np
+import psutil
+
+REPO = Path(__file__).resolve().parents[1]
+T0_UTC_S = 1_659_312_000.0  # 2022-08-01T00:00:00Z
+SWARM_A_TLE = (
+    "1 39452U 13067B   22213.51971877  .00001645  00000+0  50768-4 0  9990\n"
+    "2 39452  87.3611 208.4349 0002354 100.1496 260.0021 15.32769581488835"
+)
+INGEST_ROWS = 100
+KINDS = ("ingest", "calibration", "versions", "spacecraft", "job")
+
+
+@dataclass
+class LoadResult:
+    duration_s: float
+    clients: int
+    counts: dict[str, int] = field(default_factory=dict)
+    latencies_s: dict[str, list[float]] = field(default_factory=dict)
+    errors: list[str] = field(default_factory=list)
+    rss_mb: list[tuple[float, float]] = field(default_factory=list)  # (t [s], RSS [MB])
+    samples_ingested: int = 0
+
+    @property
+    def requests(self) -> int:
+        return sum(self.counts.values())
+
+    def percentile_ms(self, kind: str, q: float) -> float:
+        lat = self.latencies_s.get(kind) or [float("nan")]
+        return float(np.percentile(lat, q) * 1e3)
+
+    def all_latencies_ms(self, q: float) -> float:
+        lat = [x for v in self.latencies_s.values() for x in v] or [float("nan")]
+        return float(np.percentile(lat, q) * 1e3)
+
+    def rss_growth_mb(self, warmup_s: float) -> tuple[float, float, float]:
+        """Median RSS [MB] of the first and last third after ``warmup_s``, and their difference."""
+        after = [r for t, r in self.rss_mb if t >= warmup_s]
+        if len(after) < 6:
+            raise ValueError(f"only {len(after)} RSS samples after the warm-up")
+        third = len(after) // 3
+        first, last = float(np.median(after[:third])), float(np.median(after[-third:]))
+        return first, last, last - first
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def start_server(db: Path, port: int, admin_key: str, log: Path) -> subprocess.Popen[bytes]:
+    env = {
+        **os.environ,
+        "ORBITCAL_ADMIN_KEY": admin_key,
+        "ORBITCAL_LOG_LEVEL": "WARNING",
+        "PYTHONPATH": str(REPO),
+    }
+    return subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "orbitcal",
+            "serve",
+            "--port",
+            str(port),
+            "--database",
+            f"sqlite:///{db}",
+            "--no-scheduler",
+        ],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=log.open("ab"),
+    )
+
+
+def wait_healthy(url: str, proc: subprocess.Popen[bytes], timeout_s: float = 120.0) -> None:
+    t0 = time.monotonic()
+    while True:
+        try:
+            if httpx.get(url + "/healthz", timeout=2).status_code == 200:
+                return
+        except httpx.TransportError:
+            pass
+        if proc.poll() is not None:
+            raise RuntimeError(f"server exited with {proc.returncode} before answering")
+        if time.monotonic() - t0 > timeout_s:
+            raise RuntimeError(f"server not healthy after {timeout_s:g} s")
+        time.sleep(0.1)
+
+
+def physical_csv(t0_s: float, n: int, *, dt_s: float = 10.0, seed: int = 0) -> bytes:
+    """Calibratable samples (IGRF-14 along Swarm A's orbit, tumbling body, known sensor)."""
+    from scipy.spatial.transform import Rotation
+
+    from orbitcal.orbit import Orbit
+    from orbitcal.truth import truth_body_nt
+
+    rng = np.random.default_rng(seed)
+    t = t0_s + dt_s * np.arange(n)
+    dt = t - T0_UTC_S
+    r = np.asarray(Orbit.from_tle(SWARM_A_TLE).propagate(t).r_itrs_km)
+    rotvec = np.stack([dt * 2e-3, dt * 1.3e-3 + 0.4, 0.7 + dt * 0.7e-3], axis=-1)
+    xyzw = Rotation.from_rotvec(rotvec).as_quat()
+    q = np.concatenate([xyzw[:, 3:], xyzw[:, :3]], axis=1)
+    b = truth_body_nt(t, r, q, attitude_frame="GCRS", field="IGRF-14")
+    b = b @ np.linalg.inv(np.diag([1.02, 0.98, 1.01])).T + [120.0, -80.0, 45.0]
+    b += rng.normal(0.0, 2.0, b.shape)
+    lines = ["time,b_x,b_y,b_z,q_w,q_x,q_y,q_z,r_x,r_y,r_z"]
+    lines += [
+        f"{t[i]:.6f}," + ",".join(f"{v:.17g}" for v in (*b[i], *q[i], *r[i])) for i in range(n)
+    ]
+    return ("\n".join(lines) + "\n").encode()
+
+
+def prepare(url: str, admin_key: str, n_spacecraft: int) -> tuple[list[str], list[str], str]:
+    """Register and calibrate spacecraft; return their ids, one job id each, and a read key."""
+    ids = [f"load-{i}" for i in range(n_spacecraft)]
+    jobs = []
+    with httpx.Client(base_url=url, headers={"X-API-Key": admin_key}, timeout=120) as http:
+        body = physical_csv(T0_UTC_S, 600)
+        for sc in ids:
+            assert http.post("/v1/spacecraft", json={"id": sc, "tle": SWARM_A_TLE}).is_success
+            r = http.post(
+                f"/v1/spacecraft/{sc}/telemetry", content=body, headers={"content-type": "text/csv"}
+            )
+            assert r.json()["accepted"] == 600, r.text
+            jobs.append(http.post(f"/v1/spacecraft/{sc}/calibrations").json()["job_id"])
+        for job_id in jobs:
+            deadline = time.monotonic() + 300
+            while (status := http.get(f"/v1/jobs/{job_id}").json()["status"]) not in (
+                "succeeded",
+                "failed",
+            ):
+                if time.monotonic() > deadline:
+                    raise RuntimeError(f"job {job_id} still {status}")
+                time.sleep(0.2)
+            if status != "succeeded":
+                raise RuntimeError(f"preparation job {job_id} {status}")
+        read_key = http.post("/v1/keys", json={"name": "load-reader", "scopes": ["read:*"]})
+        return ids, jobs, read_key.json()["key"]
+
+
+def _batch(client: int, k: int) -> bytes:
+    # client c, batch k: times from 2022-09 on, 1 s apart, never overlapping another batch
+    t0 = T0_UTC_S + 30 * 86400 + client * 10_000_000 + k * INGEST_ROWS
+    rows = [
+        f"{t0 + i:.1f},{2e4 + i:.1f},{-1e4 + k:.1f},{3e4 - client:.1f}" for i in range(INGEST_ROWS)
+    ]
+    return ("time,b_x,b_y,b_z\n" + "\n".join(rows) + "\n").encode()
+
+
+async def _client(
+    c: int,
+    url: str,
+    ids: list[str],
+    jobs: list[str],
+    admin_key: str,
+    read_key: str,
+    ingest_share: float,
+    stop_at: float,
+    result: LoadResult,
+) -> None:
+    rng = np.random.default_rng(c)
+    k = 0
+    limits = httpx.Limits(max_connections=1, max_keepalive_connections=1)
+    async with httpx.AsyncClient(base_url=url, timeout=60, limits=limits) as http:
+        while time.monotonic() < stop_at:
+            i = int(rng.integers(len(ids)))
+            sc = ids[i]
+            if rng.random() < ingest_share:
+                kind = "ingest"
+                request = http.post(
+                    f"/v1/spacecraft/{sc}/telemetry",
+                    content=_batch(c, k),
+                    headers={"X-API-Key": admin_key, "content-type": "text/csv"},
+                )
+                k += 1
+            else:
+                kind = KINDS[1 + int(rng.integers(4))]
+                path = {
+                    "calibration": f"/v1/spacecraft/{sc}/calibration",
+                    "versions": f"/v1/spacecraft/{sc}/calibrations",
+                    "spacecraft": f"/v1/spacecraft/{sc}",
+                    "job": f"/v1/jobs/{jobs[i]}",
+                }[kind]
+                request = http.get(path, headers={"X-API-Key": read_key})
+            t0 = time.perf_counter()
+            try:
+                r = await request
+            except httpx.TransportError as exc:
+                result.errors.append(f"{kind}: {type(exc).__name__}")
+                continue
+            dt = time.perf_counter() - t0
+            if r.status_code != 200:
+                result.errors.append(f"{kind}: {r.status_code} {r.text[:120]}")
+                continue
+            if kind == "ingest":
+                result.samples_ingested += r.json()["accepted"]
+            result.counts[kind] = result.counts.get(kind, 0) + 1
+            result.latencies_s.setdefault(kind, []).append(dt)
+
+
+def run_load(
+    url: str,
+    *,
+    pid: int,
+    ids: list[str],
+    jobs: list[str],
+    admin_key: str,
+    read_key: str,
+    clients: int = 50,
+    duration_s: float = 12.0,
+    ingest_share: float = 0.2,
+) -> LoadResult:
+    """Run the closed-loop load for ``duration_s`` and sample the server's RSS meanwhile."""
+    result = LoadResult(duration_s=duration_s, clients=clients)
+    proc = psutil.Process(pid)
+    done = threading.Event()
+    t_start = time.monotonic()
+
+    def sample_rss() -> None:
+        while not done.is_set():
+            rss = proc.memory_info().rss + sum(
+                ch.memory_info().rss for ch in proc.children(recursive=True)
+            )
+            result.rss_mb.append((time.monotonic() - t_start, rss / 2**20))
+            done.wait(0.5)
+
+    sampler = threading.Thread(target=sample_rss, daemon=True)
+    sampler.start()
+
+    async def main() -> None:
+        stop_at = time.monotonic() + duration_s
+        await asyncio.gather(
+            *(
+                _client(c, url, ids, jobs, admin_key, read_key, ingest_share, stop_at, result)
+                for c in range(clients)
+            )
+        )
+
+    try:
+        asyncio.run(main())
+    finally:
+        done.set()
+        sampler.join(timeout=5)
+    result.duration_s = time.monotonic() - t_start
+    return result
+
+
+def machine() -> str:
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as f:
+            cpu = next(ln.split(":", 1)[1].strip() for ln in f if ln.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    mem = psutil.virtual_memory().total / 2**30
+    return (
+        f"{cpu}, {os.cpu_count()} cores, {mem:.0f} GiB RAM, {platform.system()} "
+        f"{platform.release()}, Python {platform.python_version()}; load average at start "
+        f"{os.getloadavg()[0]:.1f} (the machine is shared)"
+    )
+
+
+def report(result: LoadResult, *, warmup_s: float) -> str:
+    first, last, growth = result.rss_growth_mb(warmup_s)
+    lines = [
+        f"- {result.clients} concurrent clients for {result.duration_s:.0f} s: "
+        f"{result.requests} requests ({result.requests / result.duration_s:.0f} requests/s), "
+        f"{result.samples_ingested} samples ingested "
+        f"({result.samples_ingested / result.duration_s:.0f} samples/s), "
+        f"errors: {len(result.errors)}",
+        f"- latency, all requests: p50 {result.all_latencies_ms(50):.1f} ms, "
+        f"p99 {result.all_latencies_ms(99):.1f} ms",
+        "",
+        "| request | count | p50 [ms] | p99 [ms] |",
+        "|---|---|---|---|",
+    ]
+    for kind in KINDS:
+        lines.append(
+            f"| {kind} | {result.counts.get(kind, 0)} | {result.percentile_ms(kind, 50):.1f} | "
+            f"{result.percentile_ms(kind, 99):.1f} |"
+        )
+    lines += [
+        "",
+        f"Server RSS after a {warmup_s:g} s warm-up: median {first:.1f} MB over the first third, "
+        f"{last:.1f} MB over the last third (growth {growth:+.1f} MB).",
+        "",
+        "| t [s] | RSS [MB] |",
+        "|---|---|",
+    ]
+    step = max(1, len(result.rss_mb) // 20)
+    lines += [f"| {t:.0f} | {r:.1f} |" for t, r in result.rss_mb[::step]]
+    return "\n".join(lines)
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--duration", type=float, default=300.0, help="seconds of load (default 300)")
+    p.add_argument("--clients", type=int, default=50)
+    p.add_argument("--spacecraft", type=int, default=5)
+    p.add_argument("--ingest-share", type=float, default=0.2)
+    p.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "load.md")
+    args = p.parse_args()
+    admin_key = "load-" + secrets.token_hex(16)
+    with tempfile.TemporaryDirectory(prefix="orbitcal-load-") as tmp:
+        port = free_port()
+        url = f"http://127.0.0.1:{port}"
+        proc = start_server(Path(tmp) / "load.sqlite", port, admin_key, Path(tmp) / "server.log")
+        try:
+            wait_healthy(url, proc)
+            ids, jobs, read_key = prepare(url, admin_key, args.spacecraft)
+            result = run_load(
+                url,
+                pid=proc.pid,
+                ids=ids,
+                jobs=jobs,
+                admin_key=admin_key,
+                read_key=read_key,
+                clients=args.clients,
+                duration_s=args.duration,
+                ingest_share=args.ingest_share,
+            )
+        finally:
+            proc.terminate()
+            proc.wait(timeout=30)
+    text = "\n".join(
+        [
+            "# Load: mixed ingest and reads on loopback (`benchmarks/load.py`)",
+            "",
+            f"Machine: {machine()}.",
+            f"Run: `python benchmarks/load.py --duration {args.duration:g} --clients "
+            f"{args.clients} --spacecraft {args.spacecraft} --ingest-share {args.ingest_share:g}`"
+            f" on {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; `orbitcal serve` on "
+            "SQLite (WAL, synchronous=FULL), clients and server on the same 2 cores.",
+            "",
+            report(result, warmup_s=min(30.0, args.duration / 5)),
+            "",
+            "Errors: " + ("; ".join(sorted(set(result.errors))[:10]) or "none") + ".",
+            "",
+        ]
+    )
+    args.out.write_text(text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
