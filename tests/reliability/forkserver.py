@@ -9,7 +9,8 @@ them with real signals. Children are reaped automatically (``SIGCHLD`` ignored).
 
 Spec keys: ``kind`` (``cli`` | ``app`` | ``retrain``), ``log`` (file for the child's stdout and
 stderr), ``env`` (extra environment), and per kind ``argv``; ``settings``, ``port``,
-``fit_delay_s``; ``settings``, ``job_id``, ``fit_delay_s``.
+``fit_delay_s``; ``settings``, ``job_id``, ``fit_delay_s``; any kind: ``patch_fit_delay_s``
+(replaces ``service.science.fit_calibration`` by a slow one in the child).
 """
 
 from __future__ import annotations
@@ -30,11 +31,13 @@ from service import science
 from service.settings import Settings
 from service.storage import make_engine
 
+_REAL_FIT = science.fit_calibration
+
 
 def _slow_fit(delay_s: float) -> Any:
     def fit(*args: Any, **kwargs: Any) -> dict[str, Any]:
         time.sleep(delay_s)  # the window in which the test kills the process
-        return science.fit_calibration(*args, **kwargs)
+        return _REAL_FIT(*args, **kwargs)
 
     return fit
 
@@ -42,6 +45,8 @@ def _slow_fit(delay_s: float) -> Any:
 def _child(spec: dict[str, Any]) -> int:
     os.environ.update(spec.get("env", {}))
     kind = spec["kind"]
+    if spec.get("patch_fit_delay_s"):  # e.g. for `orbitcal worker`, whose fit is not injectable
+        science.fit_calibration = _slow_fit(float(spec["patch_fit_delay_s"]))
     if kind == "cli":
         return orbitcal.cli.main(spec["argv"])
     settings = Settings(**spec.get("settings", {}))

@@ -11,6 +11,7 @@ after a worker loss (``task_acks_late`` + ``task_reject_on_worker_lost``).
 from __future__ import annotations
 
 import time
+import uuid
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +27,7 @@ from reliability_helpers import (
     kill9,
     physical_csv,
     pid_alive,
+    require_service,
     sqlite_query,
     sqlite_settings,
     wait_healthy,
@@ -176,3 +178,53 @@ def test_kill_9_of_a_worker_mid_retraining_then_redelivery_ends_the_job(tmp_path
             assert _served(url) == served_before
             kill9(pid)
         engine.dispose()
+
+
+@pytest.mark.services
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+def test_kill_9_of_a_celery_worker_mid_retraining_over_rabbitmq(tmp_path: Path) -> None:
+    """The real thing: ``orbitcal worker`` (Celery, RabbitMQ) killed inside a fit; RabbitMQ
+    redelivers the unacknowledged task to the next worker, which ends the job."""
+    require_service("RabbitMQ", 5672)
+    from kombu import Connection
+
+    db = tmp_path / "celery.sqlite"
+    port = free_port()
+    url = f"http://127.0.0.1:{port}"
+    broker = "amqp://guest:guest@127.0.0.1:5672//"
+    queue = f"orbitcal-reliability-{uuid.uuid4().hex[:8]}"
+    settings = sqlite_settings(db)
+    celery_settings = {**settings, "job_backend": "celery", "broker_url": broker, "queue": queue}
+    worker_env = {"ORBITCAL_QUEUE": queue, "ORBITCAL_LOG_LEVEL": "WARNING"}
+    worker_argv = ["worker", "--broker", broker, "--database", f"sqlite:///{db}"]
+    try:
+        with fork_server(tmp_path) as fs:
+            pid = fs.spawn({"kind": "app", "port": port, "settings": settings})
+            wait_healthy(url, pid=pid)
+            served_before = _first_calibration(url)
+            kill9(pid)
+            api = fs.spawn({"kind": "app", "port": port, "settings": celery_settings})
+            wait_healthy(url, pid=api)
+            worker = fs.spawn(
+                {"kind": "cli", "argv": worker_argv, "env": worker_env, "patch_fit_delay_s": 60}
+            )
+            r = httpx.post(url + "/v1/spacecraft/job-1/calibrations", headers=H, timeout=60)
+            job_id = r.json()["job_id"]
+            _wait_job(url, job_id, {"running"}, timeout_s=120)
+            time.sleep(0.3)
+            kill9(worker)
+            assert sqlite_query(db, "SELECT job_id FROM retrain_locks") == [(job_id,)]
+            # A fresh worker gets the redelivered task and ends the job.
+            fs.spawn({"kind": "cli", "argv": worker_argv, "env": worker_env})
+            job = _wait_job(url, job_id, {"succeeded", "failed"}, timeout_s=120)
+            assert job["status"] == "failed" and "interrupted" in job["error"], job
+            assert sqlite_query(db, "SELECT COUNT(*) FROM retrain_locks") == [(0,)]
+            assert _served(url) == served_before
+            # The lock is free: the next retraining runs on the new worker.
+            r = httpx.post(url + "/v1/spacecraft/job-1/calibrations", headers=H, timeout=60)
+            job = _wait_job(url, r.json()["job_id"], {"succeeded", "failed"}, timeout_s=120)
+            assert job["status"] == "succeeded", job
+    finally:
+        with Connection(broker) as conn:
+            conn.default_channel.queue_delete(queue)
