@@ -210,17 +210,14 @@ def run_adam(
 
 def _torch_net(net: BPNetwork, w: torch.Tensor) -> torch.nn.Module:
     p = net.unpack(w)
-    m = torch.nn.Sequential(
-        torch.nn.Linear(net.n_in, net.n_hidden),
-        torch.nn.Tanh(),
-        torch.nn.Linear(net.n_hidden, 3),
-    ).double()
+    first = torch.nn.Linear(net.n_in, net.n_hidden).double()
+    last = torch.nn.Linear(net.n_hidden, 3).double()
     with torch.no_grad():
-        m[0].weight.copy_(p["W1"])
-        m[0].bias.copy_(p["b1"])
-        m[2].weight.copy_(p["W2"])
-        m[2].bias.copy_(p["b2"])
-    return m
+        first.weight.copy_(p["W1"])
+        first.bias.copy_(p["b1"])
+        last.weight.copy_(p["W2"])
+        last.bias.copy_(p["b2"])
+    return torch.nn.Sequential(first, torch.nn.Tanh(), last)
 
 
 def _torch_linear(w: torch.Tensor) -> torch.nn.Module:
@@ -250,6 +247,8 @@ def _np_network(
 def bench_case(name: str, n: int, hidden: int | None, *, seed: int, adam_cap_s: float) -> list[Run]:
     u, t = make_data(n, seed)
     g = torch.Generator().manual_seed(seed)
+    res_np: Callable[[np.ndarray], np.ndarray]
+    jac_np: Callable[[np.ndarray], np.ndarray]
     if hidden is None:
         problem: object = LinearProblem(u, t)
         w0 = torch.zeros(12, dtype=torch.float64)
@@ -258,11 +257,13 @@ def bench_case(name: str, n: int, hidden: int | None, *, seed: int, adam_cap_s: 
         assert isinstance(lp, LinearProblem)
         J = lp.jacobian_np()
 
-        def res_np(w: np.ndarray) -> np.ndarray:
+        def res_lin(w: np.ndarray) -> np.ndarray:
             return lp.residuals(torch.from_numpy(w)).numpy()
 
-        def jac_np(w: np.ndarray) -> np.ndarray:
+        def jac_lin(w: np.ndarray) -> np.ndarray:
             return J
+
+        res_np, jac_np = res_lin, jac_lin
 
         def make_model() -> torch.nn.Module:
             return _torch_linear(w0)
