@@ -16,6 +16,7 @@ import httpx
 import numpy as np
 import psutil
 import pytest
+from pydantic import SecretStr
 from reliability_helpers import (
     ADMIN_KEY,
     CSV,
@@ -61,7 +62,7 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[LiveServe
     db = tmp_path_factory.mktemp("bad") / "bad.sqlite"
     settings = Settings(
         database_url=f"sqlite:///{db}",
-        admin_key=ADMIN_KEY,
+        admin_key=SecretStr(ADMIN_KEY),
         scheduler=False,
         max_body_bytes=MAX_BODY,
         log_level="CRITICAL",

@@ -10,6 +10,7 @@ import uuid
 from pathlib import Path
 
 import pytest
+from pydantic import SecretStr
 from reliability_helpers import (
     ADMIN_KEY,
     CSV,
@@ -33,7 +34,7 @@ def _queue_with_broker_down(db: Path) -> tuple[str, Settings, float]:
     """Register, upload, ask for a retraining with the broker down: ``(job_id, settings, s)``."""
     settings = Settings(
         database_url=f"sqlite:///{db}",
-        admin_key=ADMIN_KEY,
+        admin_key=SecretStr(ADMIN_KEY),
         scheduler=False,
         job_backend="celery",
         broker_url=f"redis://127.0.0.1:{free_port()}/0",  # nothing listens there

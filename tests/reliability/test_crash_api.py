@@ -147,23 +147,23 @@ def test_kill_9_during_ingest_loses_no_acknowledged_sample(tmp_path: Path) -> No
         )
         return {(int(a), int(b)): int(n) for (a, b), n in zip(keys, counts, strict=True)}
 
-    before = by_batch(stored_before_retry)
+    stored = by_batch(stored_before_retry)
     assert len(np.unique(stored_before_retry)) == len(stored_before_retry)
     acked_total = 0
     committed_unacked = 0
     for c, lg in enumerate(logs):
         for k, accepted in lg.acked.items():
             assert accepted == BATCH, (c, k, accepted)  # unique times: all new on first ack
-            assert before.get((c, k)) == BATCH, f"acknowledged batch {c}/{k} not fully stored"
+            assert stored.get((c, k)) == BATCH, f"acknowledged batch {c}/{k} not fully stored"
             acked_total += 1
         for k in lg.unacked | lg.refused:
-            n = before.get((c, k), 0)
+            n = stored.get((c, k), 0)
             assert n in (0, BATCH), f"unacknowledged batch {c}/{k} half-written: {n} rows"
             committed_unacked += n == BATCH
-        assert lg.refused.isdisjoint(k for (cc, k) in before if cc == c)  # refused = never stored
+        assert lg.refused.isdisjoint(k for (cc, k) in stored if cc == c)  # refused = never stored
     # Nothing stored that no client sent.
     sent = {(c, k) for c, lg in enumerate(logs) for k in (*lg.acked, *lg.unacked)}
-    assert set(before) <= sent
+    assert set(stored) <= sent
     assert retry_accepted + retry_duplicates == BATCH * retried
     assert retry_duplicates == BATCH * committed_unacked
 

@@ -24,6 +24,7 @@ from pathlib import Path
 import httpx
 import numpy as np
 import pytest
+from pydantic import SecretStr
 from reliability_helpers import (
     ADMIN_KEY,
     CSV,
@@ -129,7 +130,7 @@ def test_postgresql_crash_during_ingest_gives_503_and_no_partial_batch(
     import psycopg
 
     settings = Settings(
-        database_url=cluster.url, admin_key=ADMIN_KEY, scheduler=False, log_level="ERROR"
+        database_url=cluster.url, admin_key=SecretStr(ADMIN_KEY), scheduler=False, log_level="ERROR"
     )
     logs = [Log() for _ in range(CLIENTS)]
     stop = threading.Event()

@@ -135,12 +135,6 @@ def _null_first(body: bytes) -> bool:
     return body.removeprefix(b"\xef\xbb\xbf").lstrip(b" \t\r\n").startswith(b"null")
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="pyarrow 26.0.1 pyarrow.json.read_json segfaults when the first value is null; "
-    "parse_telemetry's NDJSON fast path calls it (the service guards against it in "
-    "service.ingest; the library should too)",
-)
 @pytest.mark.parametrize("body", [b"null", b"\xef\xbb\xbfnull\n", b" \r\nnull\n{}"])
 def test_ndjson_starting_with_null_does_not_crash_the_process(body: bytes) -> None:
     code = (

@@ -18,6 +18,7 @@ from typing import Any
 
 import httpx
 import pytest
+from pydantic import SecretStr
 from reliability_helpers import (
     ADMIN_KEY,
     CSV,
@@ -133,7 +134,7 @@ def test_scope_matrix_hashed_keys_and_no_secret_in_logs(
     db = tmp_path / "sec.sqlite"
     settings = Settings(
         database_url=f"sqlite:///{db}",
-        admin_key=ADMIN_KEY,
+        admin_key=SecretStr(ADMIN_KEY),
         scheduler=False,
         log_level="DEBUG",
         key_cache_s=0.0,
@@ -238,7 +239,7 @@ def _format_matrix(matrix: list[dict[str, int]]) -> str:
 def test_rate_limit_is_per_key_with_retry_after(tmp_path: Path) -> None:
     settings = Settings(
         database_url=f"sqlite:///{tmp_path / 'rl.sqlite'}",
-        admin_key=ADMIN_KEY,
+        admin_key=SecretStr(ADMIN_KEY),
         scheduler=False,
         rate_limit_per_s=2.0,
         rate_limit_burst=10,
@@ -271,7 +272,7 @@ def test_rate_limit_is_per_key_with_retry_after(tmp_path: Path) -> None:
 def test_cors_is_closed_by_default(tmp_path: Path) -> None:
     settings = Settings(
         database_url=f"sqlite:///{tmp_path / 'cors.sqlite'}",
-        admin_key=ADMIN_KEY,
+        admin_key=SecretStr(ADMIN_KEY),
         scheduler=False,
         log_level="WARNING",
     )
