@@ -449,6 +449,11 @@ def _read_json_array_bytes(data: bytes) -> pd.DataFrame:
 def _read_ndjson_bytes(data: bytes) -> tuple[pd.DataFrame, dict[int, str]]:
     try:
         # Columnar C++ reader for clean files (multi-threaded, no per-row Python objects).
+        # pyarrow 26's reader kills the process (SIGSEGV) when the first value is not an object
+        # (e.g. a body starting with ``null``), so it only sees bodies that start with ``{``.
+        head = data[3:] if data.startswith(b"\xef\xbb\xbf") else data
+        if not head.lstrip(b" \t\r\n").startswith(b"{"):
+            raise ValueError("not an object first: parse line by line")
         table = pa_json.read_json(io.BytesIO(data))
         if table.num_rows and all(
             not pa.types.is_nested(f.type) and not pa.types.is_null(f.type) for f in table.schema
