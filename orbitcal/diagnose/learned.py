@@ -73,7 +73,7 @@ def learned_field_error(
     train: BoolArray,
     holdout: BoolArray,
     rng: np.random.Generator | None = None,
-    max_nfev: int = 200,
+    max_nfev: int = 400,
 ) -> dict[str, Any]:
     """Fit the seed-003 model to a residual on ``train``; score it on ``holdout``.
 
@@ -140,7 +140,7 @@ def learned_field_error(
     def fun(theta: FloatArray) -> FloatArray:
         return (_net(theta, xt, n_in) - yt).ravel()
 
-    sol = least_squares(fun, theta0, method="lm", max_nfev=max_nfev * n_par)
+    sol = least_squares(fun, theta0, method="lm", max_nfev=max_nfev)
     net = _net(sol.x, x, n_in) * y_scale
 
     def body(v_nec: FloatArray) -> FloatArray:
