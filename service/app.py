@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import threading
 from collections.abc import AsyncIterator, Callable
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import asynccontextmanager
 from typing import Any
 
@@ -134,9 +136,11 @@ def create_app(
                 "auth": settings.auth,
             },
         )
+        app.state.diagnosis_pool = ThreadPoolExecutor(1, thread_name_prefix="orbitcal-diagnosis")
         try:
             yield
         finally:
+            app.state.diagnosis_pool.shutdown(wait=False, cancel_futures=True)
             scheduler.shutdown()
             job_runner.shutdown()
             engine.dispose()
@@ -169,6 +173,8 @@ def create_app(
         hash_key(settings.admin_key.get_secret_value()) if settings.admin_key else None
     )
     app.state.diagnosis_cache = {}
+    app.state.diagnosis_running = {}
+    app.state.diagnosis_lock = threading.Lock()
     app.state.key_cache = {}
     app.state.key_lock = asyncio.Lock()
     app.state.calibration_cache = {}

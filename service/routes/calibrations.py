@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import asyncio
-import threading
 import time
+from concurrent.futures import Future
 from typing import Annotated, Any
 
 import numpy as np
@@ -187,42 +187,76 @@ def residuals(
     }
 
 
-_diagnosis_lock = threading.Lock()
+def _compute_diagnosis(app: Any, spacecraft_id: str) -> dict[str, Any]:
+    settings = app.state.settings
+    sc, tel, _doc = _recent_telemetry(app.state.engine, spacecraft_id, settings.window_s)
+    report = science.diagnose(
+        tel,
+        orbit=science.load_orbit(sc.tle, sc.omm),
+        attitude_frame=sc.attitude_frame,
+        field=settings.reference_field,
+    )
+    app.state.diagnosis_cache[spacecraft_id] = (int(sc.sample_count), report)
+    return report
 
 
-@router.get("/{spacecraft_id}/diagnosis", responses={**_ERRORS, 501: {"model": ErrorPublic}})
+def _spacecraft(engine: Any, spacecraft_id: str) -> Any:
+    with read_tx(engine) as conn:
+        return get_spacecraft(conn, spacecraft_id)
+
+
+def _diagnosis_future(app: Any, spacecraft_id: str) -> Future[dict[str, Any]]:
+    """The running computation for this spacecraft, or a new one (one at a time per spacecraft)."""
+    running: dict[str, Future[dict[str, Any]]] = app.state.diagnosis_running
+    with app.state.diagnosis_lock:
+        fut = running.get(spacecraft_id)
+        if fut is None or fut.done():
+            fut = app.state.diagnosis_pool.submit(_compute_diagnosis, app, spacecraft_id)
+            running[spacecraft_id] = fut
+        return fut
+
+
+@router.get(
+    "/{spacecraft_id}/diagnosis",
+    responses={**_ERRORS, 422: {"model": ErrorPublic}, 501: {"model": ErrorPublic}},
+)
 async def diagnosis(
     spacecraft_id: str,
     request: Request,
     engine: EngineDep,
-    settings: SettingsDep,
     _who: Annotated[Principal, require_scope("read")],
+    cached: Annotated[
+        bool,
+        Query(
+            description="answer the latest report computed so far at once (404 if none) instead "
+            "of computing one on the current data"
+        ),
+    ] = False,
 ) -> dict[str, Any]:
-    """A diagnosis report (CONTRACT section 5) on the stored telemetry's recent window."""
+    """A diagnosis report (CONTRACT section 5) on the stored telemetry's recent window.
 
-    def work() -> dict[str, Any]:
-        sc, tel, _doc = _recent_telemetry(engine, spacecraft_id, settings.window_s)
-        key = (sc.id, int(sc.sample_count))
-        cache: dict[Any, dict[str, Any]] = request.app.state.diagnosis_cache
-        with _diagnosis_lock:
-            if key in cache:
-                return cache[key]
-        try:
-            report = science.diagnose(
-                tel,
-                orbit=science.load_orbit(sc.tle, sc.omm),
-                attitude_frame=sc.attitude_frame,
-                field=settings.reference_field,
-            )
-        except ImportError:
-            raise HTTPException(
-                status_code=501, detail="this build has no orbitcal.diagnose"
-            ) from None
-        except ValueError as exc:
-            raise HTTPException(status_code=422, detail=str(exc)) from None
-        with _diagnosis_lock:
-            cache.clear()
-            cache[key] = report
-        return report
-
-    return await run_in_threadpool(work)
+    Reports are computed in a background thread (one computation per spacecraft at a time) and
+    kept per spacecraft until new samples arrive; without ``cached`` the call waits for a report
+    on the current data (minutes for a day of data), with ``cached=true`` it answers the latest
+    report at once.
+    """
+    app = request.app
+    sc = await run_in_threadpool(_spacecraft, engine, spacecraft_id)
+    hit = app.state.diagnosis_cache.get(spacecraft_id)
+    if hit is not None and (cached or hit[0] == int(sc.sample_count)):
+        return hit[1]  # type: ignore[no-any-return]
+    if cached:
+        computing = app.state.diagnosis_running.get(spacecraft_id)
+        state = "one is being computed" if computing and not computing.done() else "none asked for"
+        raise HTTPException(
+            status_code=404,
+            detail=f"no diagnosis of {spacecraft_id!r} yet ({state}); "
+            "GET without cached=true computes one",
+        )
+    fut = _diagnosis_future(app, spacecraft_id)
+    try:
+        return await asyncio.wrap_future(fut)
+    except ImportError:
+        raise HTTPException(status_code=501, detail="this build has no orbitcal.diagnose") from None
+    except ValueError as exc:
+        raise HTTPException(status_code=422, detail=str(exc)) from None

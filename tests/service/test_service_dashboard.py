@@ -44,6 +44,27 @@ def test_dashboard_shows_spacecraft_versions_residuals_and_diagnosis(tmp_path: P
         assert r.json()["accepted"] == 3000
         job = wait_job(c, c.post("/v1/spacecraft/swarm-a/calibrations").json()["job_id"])
         assert job["status"] == "succeeded"
+        assert c.get("/v1/spacecraft/swarm-a/diagnosis?cached=true").status_code == 404
+        # a report as orbitcal.diagnose would leave it (computing one takes minutes): the page
+        # must show the latest one
+        report = {
+            "baseline": {"method": "linear", "holdout_rms_nt": 12.5},
+            "verdict": "temperature",
+            "effects": [
+                {
+                    "name": "temperature",
+                    "significant": True,
+                    "holdout_rms_before_nt": 12.5,
+                    "holdout_rms_after_nt": 2.1,
+                    "shrink": 5.95,
+                    "params": {},
+                }
+            ],
+            "where": {"axis_rms_nt": [7.0, 6.0, 8.0]},
+        }
+        server.app.state.diagnosis_cache["swarm-a"] = (3000, report)
+        assert c.get("/v1/spacecraft/swarm-a/diagnosis?cached=true").json() == report
+        assert c.get("/v1/spacecraft/swarm-a/diagnosis").json() == report  # current: no recompute
         profile = tmp_path / "chromium-profile"
         proc = subprocess.run(
             [
@@ -77,5 +98,7 @@ def test_dashboard_shows_spacecraft_versions_residuals_and_diagnosis(tmp_path: P
     assert re.search(r"RMS \d+\.\d+ nT per component", dom)
     # latest diagnosis: a section-5 verdict, or the service's stated reason why not
     diag = re.search(r'<pre id="diagnosis">(.*?)</pre>', dom, re.S)
-    assert diag is not None and ("verdict:" in diag.group(1) or "diagnose" in diag.group(1))
+    assert diag is not None and diag.group(1).startswith("verdict: temperature")
+    assert '"holdout_rms_after_nt": 2.1' in diag.group(1)
+    assert 'id="run-diagnosis"' in dom
     assert ADMIN_KEY not in dom.replace(f"#key={ADMIN_KEY}", "")
