@@ -7,6 +7,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import threading
+import time
 from collections.abc import AsyncIterator, Callable
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import asynccontextmanager
@@ -33,6 +34,43 @@ from service.storage import hash_key, make_engine, upgrade
 __all__ = ["create_app"]
 
 log = logging.getLogger("orbitcal.service")
+
+
+class AccessLog:
+    """One structured log line per request: method, path (no query string), status, duration."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+        self.log = logging.getLogger("orbitcal.service.access")
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        start = time.perf_counter()
+        status = 500
+
+        async def send_wrapper(message: Any) -> None:
+            nonlocal status
+            if message["type"] == "http.response.start":
+                status = int(message["status"])
+            await send(message)
+
+        try:
+            await self.app(scope, receive, send_wrapper)
+        finally:
+            level = logging.WARNING if status >= 500 else logging.INFO
+            if self.log.isEnabledFor(level):
+                self.log.log(
+                    level,
+                    "request",
+                    extra={
+                        "method": scope["method"],
+                        "path": scope["path"],
+                        "status": status,
+                        "ms": round((time.perf_counter() - start) * 1e3, 2),
+                    },
+                )
 
 
 class BodyLimit:
@@ -188,6 +226,7 @@ def create_app(
         log.warning("no ORBITCAL_ADMIN_KEY set: no key can be created until one is")
 
     app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
+    app.add_middleware(AccessLog)
     if settings.rate_limit_per_s > 0:  # outermost: a throttled caller costs no body read
         app.add_middleware(
             RateLimit, rate_per_s=settings.rate_limit_per_s, burst=settings.rate_limit_burst
@@ -228,6 +267,18 @@ def create_app(
             "database unavailable, nothing was stored; retry later",
             headers={"Retry-After": "5"},
         )
+
+    @app.exception_handler(sa.exc.DBAPIError)
+    async def _db_error(_request: Request, exc: sa.exc.DBAPIError) -> JSONResponse:
+        if exc.connection_invalidated:
+            log.warning("database connection lost", extra={"error": type(exc.orig).__name__})
+            return _error(
+                503,
+                "database unavailable, nothing was stored; retry later",
+                headers={"Retry-After": "5"},
+            )
+        log.error("database error", exc_info=exc)
+        return _error(500, "internal error (logged)")
 
     @app.exception_handler(Exception)
     async def _unexpected(_request: Request, exc: Exception) -> JSONResponse:

@@ -8,6 +8,7 @@ only from ``queued``, so redelivery never retrains twice.
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from functools import cache
 
 from celery import Celery
@@ -54,8 +55,14 @@ class CeleryRunner:
     def __init__(self, settings: Settings) -> None:
         self.app = make_celery(settings)
         self.queue = settings.queue
+        # One sender thread, so that no request waits for the broker: with the broker down the
+        # Redis client alone retries for ~6 s (found by tests/reliability/test_broker_outage.py).
+        self._sender = ThreadPoolExecutor(max_workers=1, thread_name_prefix="orbitcal-send")
 
     def submit(self, job_id: str) -> None:
+        self._sender.submit(self._send, job_id)
+
+    def _send(self, job_id: str) -> None:
         try:
             self.app.send_task(TASK_NAME, args=[job_id], queue=self.queue, retry=False)
         except Exception:  # broker unavailable: the job is durable in the database
@@ -66,4 +73,5 @@ class CeleryRunner:
             )
 
     def shutdown(self) -> None:
-        pass
+        # Unsent jobs stay queued in the database; the scheduler re-submits them.
+        self._sender.shutdown(wait=True, cancel_futures=True)

@@ -24,6 +24,9 @@ __all__ = ["FleetScheduler", "due_spacecraft"]
 
 log = logging.getLogger("orbitcal.service.scheduler")
 
+#: A job still queued this long after creation is sent again, then at most this often [s].
+RESUBMIT_S = 300.0
+
 
 def due_spacecraft(engine: Engine, settings: Settings, *, now: float) -> list[int]:
     """Primary keys of spacecraft due for a scheduled retraining at ``now``."""
@@ -56,6 +59,7 @@ class FleetScheduler:
         self.settings = settings
         self.runner = runner
         self._scheduler = BackgroundScheduler(timezone="UTC")
+        self._resent: dict[str, float] = {}
 
     def tick(self) -> list[str]:
         """One scheduling pass; returns the ids of the jobs submitted."""
@@ -73,15 +77,21 @@ class FleetScheduler:
                     conn.execute(
                         sa.select(Job.id).where(
                             Job.status == "queued",
-                            Job.created_at < now - max(60.0, 6 * self.settings.scheduler_tick_s),
+                            Job.created_at < now - RESUBMIT_S,
                         )
                     )
                     .scalars()
                     .all()
                 )
+            # re-send each stuck job at most every RESUBMIT_S (a backlog is not a lost message)
             for job_id in stuck:
+                if now - self._resent.get(job_id, -1e18) < RESUBMIT_S:
+                    continue
+                self._resent[job_id] = now
                 self.runner.submit(job_id)
                 submitted.append(job_id)
+            if len(self._resent) > 100_000:
+                self._resent.clear()
         except sa.exc.SQLAlchemyError:
             log.warning("scheduler tick skipped: database unavailable", exc_info=True)
         except Exception:
