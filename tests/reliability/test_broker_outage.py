@@ -67,8 +67,8 @@ def _queue_with_broker_down(db: Path) -> tuple[str, Settings, float]:
 def test_job_asked_for_while_the_broker_is_down_is_dispatched_later(tmp_path: Path) -> None:
     db = tmp_path / "broker.sqlite"
     job_id, settings, answer_s = _queue_with_broker_down(db)
-    # The answer waits for the broker client's own connection attempts (~6 s measured), no more.
-    assert answer_s < 30.0, f"POST /calibrations took {answer_s:.1f} s with the broker down"
+    # The request never waits for the broker (its client alone retries for ~6 s when it is down).
+    assert answer_s < 2.0, f"POST /calibrations took {answer_s:.1f} s with the broker down"
     print(f"\nPOST /calibrations with the broker down answered 202 in {answer_s:.2f} s")
     # The broker is back: here a runner that executes what the scheduler dispatches.
     engine = make_engine(settings.database_url)
@@ -106,10 +106,14 @@ def test_queued_job_reaches_the_real_redis_broker_when_it_is_back(tmp_path: Path
     client.delete(back.queue)
     engine = make_engine(back.database_url)
     try:
-        submitted = FleetScheduler(engine, back, CeleryRunner(back)).tick()
+        runner = CeleryRunner(back)
+        submitted = FleetScheduler(engine, back, runner).tick()
         assert job_id in submitted
-        messages = client.lrange(back.queue, 0, -1)
-        assert any(job_id.encode() in m for m in messages), "the task message is not in Redis"
+        deadline = time.monotonic() + 30  # sent by the runner's sender thread
+        while not any(job_id.encode() in m for m in client.lrange(back.queue, 0, -1)):
+            assert time.monotonic() < deadline, "the task message is not in Redis"
+            time.sleep(0.05)
+        runner.shutdown()
     finally:
         client.delete(back.queue)
         engine.dispose()
