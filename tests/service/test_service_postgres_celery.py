@@ -6,6 +6,7 @@ Each run uses its own PostgreSQL schema and its own Celery queue.
 
 from __future__ import annotations
 
+import contextlib
 import io
 import os
 import subprocess
@@ -172,6 +173,17 @@ def test_end_to_end_on_postgresql_with_celery(broker: str, tmp_path: Path) -> No
             )
             assert doc2["version"] == 2 and rms2 < 10.0, rms2
             assert worker.poll() is None, worker.stderr.read() if worker.stderr else ""
+        _delete_queue(settings)
+
+
+def _delete_queue(settings: Settings) -> None:
+    """Leave no per-run queue behind on the broker."""
+    from service.celery_app import make_celery
+
+    app = make_celery(settings)
+    # an empty queue may be gone already (Redis drops empty lists)
+    with app.connection_for_write() as conn, contextlib.suppress(Exception):
+        conn.default_channel.queue_delete(settings.queue)
 
 
 def test_bulk_insert_counts_duplicates_on_postgresql() -> None:
