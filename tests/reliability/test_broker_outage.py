@@ -23,7 +23,7 @@ from reliability_helpers import (
 )
 
 from service.jobs import InlineRunner
-from service.scheduler import FleetScheduler
+from service.scheduler import RESUBMIT_S, FleetScheduler
 from service.settings import Settings
 from service.storage import make_engine
 
@@ -56,9 +56,11 @@ def _queue_with_broker_down(db: Path) -> tuple[str, Settings, float]:
         time.sleep(0.5)
         job = http.get(f"/v1/jobs/{job_id}").json()
         assert job["status"] == "queued", job
-    # The broker stays down for longer than the scheduler's patience (60 s): age the job.
+    # The broker stays down for longer than the scheduler's patience: age the job past it.
     con = sqlite3.connect(db)
-    con.execute("UPDATE jobs SET created_at = created_at - 120 WHERE id = ?", (job_id,))
+    con.execute(
+        "UPDATE jobs SET created_at = created_at - ? WHERE id = ?", (RESUBMIT_S + 60, job_id)
+    )
     con.commit()
     con.close()
     return job_id, settings, answer_s
