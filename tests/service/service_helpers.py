@@ -112,3 +112,37 @@ def wait_versions(
             return versions  # type: ignore[no-any-return]
         time.sleep(0.2)
     raise AssertionError(f"{spacecraft} did not reach {n} calibration versions in {timeout_s} s")
+
+
+def encode_all_formats(df: Any) -> list[tuple[bytes, str]]:
+    """The table split in five consecutive parts: CSV, NDJSON, JSON, Parquet, CCSDS packets."""
+    import io
+
+    import numpy as np
+
+    from orbitcal import ccsds
+
+    bodies = []
+    parts = np.array_split(np.arange(len(df)), 5)
+    for fmt, idx in zip(("csv", "ndjson", "json", "parquet", "ccsds"), parts, strict=True):
+        part = df.iloc[idx]
+        if fmt == "csv":
+            bodies.append((part.to_csv(index=False).encode(), "text/csv"))
+        elif fmt == "ndjson":
+            text = part.to_json(orient="records", lines=True, double_precision=15)
+            bodies.append((text.encode(), "application/x-ndjson"))
+        elif fmt == "json":
+            text = part.to_json(orient="records", double_precision=15)
+            bodies.append((text.encode(), "application/json"))
+        elif fmt == "parquet":
+            buf = io.BytesIO()
+            part.to_parquet(buf, index=False)
+            bodies.append((buf.getvalue(), "application/vnd.apache.parquet"))
+        else:
+            packets = ccsds.encode_packets(
+                part["time"].to_numpy(),
+                part[["b_x", "b_y", "b_z"]].to_numpy(),
+                q_wxyz=part[["q_w", "q_x", "q_y", "q_z"]].to_numpy(),
+            )
+            bodies.append((packets, "application/vnd.ccsds.space-packet"))
+    return bodies

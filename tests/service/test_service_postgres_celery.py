@@ -21,10 +21,16 @@ import numpy as np
 import pytest
 from conftest_services import require_service
 from pydantic import SecretStr
-from service_helpers import ADMIN_KEY, live_server, pg_schema_url, wait_job, wait_versions
+from service_helpers import (
+    ADMIN_KEY,
+    encode_all_formats,
+    live_server,
+    pg_schema_url,
+    wait_job,
+    wait_versions,
+)
 from service_worlds import SENSOR_A, SENSOR_B, SWARM_A_TLE, T0_UTC_S, world
 
-from orbitcal import ccsds
 from service import science
 from service.settings import Settings
 from service.storage import insert_samples, make_engine, upgrade, write_tx
@@ -95,30 +101,7 @@ def test_end_to_end_on_postgresql_with_celery(broker: str, tmp_path: Path) -> No
                 == 201
             )
             df, _ = world(T0_UTC_S, 4320, positions=False, seed=3)
-            # every format, CCSDS included
-            parts = np.array_split(np.arange(len(df)), 5)
-            bodies = []
-            for fmt, idx in zip(("csv", "ndjson", "json", "parquet", "ccsds"), parts, strict=True):
-                part = df.iloc[idx]
-                if fmt == "csv":
-                    bodies.append((part.to_csv(index=False).encode(), "text/csv"))
-                elif fmt == "ndjson":
-                    text = part.to_json(orient="records", lines=True, double_precision=15)
-                    bodies.append((text.encode(), "application/x-ndjson"))
-                elif fmt == "json":
-                    text = part.to_json(orient="records", double_precision=15)
-                    bodies.append((text.encode(), "application/json"))
-                elif fmt == "parquet":
-                    buf = io.BytesIO()
-                    part.to_parquet(buf, index=False)
-                    bodies.append((buf.getvalue(), "application/vnd.apache.parquet"))
-                else:
-                    packets = ccsds.encode_packets(
-                        part["time"].to_numpy(),
-                        part[["b_x", "b_y", "b_z"]].to_numpy(),
-                        q_wxyz=part[["q_w", "q_x", "q_y", "q_z"]].to_numpy(),
-                    )
-                    bodies.append((packets, "application/vnd.ccsds.space-packet"))
+            bodies = encode_all_formats(df)  # every format, CCSDS included
             for body, media in bodies:
                 r = c.post(
                     "/v1/spacecraft/swarm-a/telemetry",
