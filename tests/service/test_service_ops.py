@@ -186,3 +186,17 @@ def test_scheduler_fails_jobs_of_a_lost_worker_and_releases_the_lock(tmp_path: P
         locks = conn.execute(sa.select(sa.func.count()).select_from(RetrainLock)).scalar()
     assert status == "failed" and "worker lost" in str(error) and locks == 0
     engine.dispose()
+
+
+def test_migrations_match_the_models(tmp_path: Path) -> None:
+    from alembic.autogenerate import compare_metadata
+    from alembic.migration import MigrationContext
+
+    from service.storage import Base
+
+    engine = make_engine(f"sqlite:///{tmp_path / 'cmp.sqlite'}")
+    upgrade(engine)
+    with engine.connect() as conn:
+        diff = compare_metadata(MigrationContext.configure(conn), Base.metadata)
+    engine.dispose()
+    assert diff == []
