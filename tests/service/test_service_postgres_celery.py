@@ -188,3 +188,56 @@ def test_bulk_insert_counts_duplicates_on_postgresql() -> None:
             count = conn.exec_driver_sql("SELECT sample_count FROM spacecraft").scalar()
         assert count == 101
         engine.dispose()
+
+
+def test_orbitcal_worker_scheduler_process_sends_due_jobs_to_the_broker(tmp_path: Path) -> None:
+    """``orbitcal worker --scheduler`` (the compose file's scheduler service) as a process."""
+    import redis
+    import sqlalchemy as sa
+
+    from orbitcal.telemetry import from_frame
+    from service.ingest import telemetry_to_rows
+    from service.storage import Job, Spacecraft
+
+    require_service("Redis", 6379)
+    url = f"sqlite:///{tmp_path / 'sched.sqlite'}"
+    engine = make_engine(url)
+    upgrade(engine)
+    tel = from_frame(world(T0_UTC_S, 600)[0]).telemetry
+    with write_tx(engine) as conn:
+        conn.execute(
+            sa.insert(Spacecraft).values(
+                id="s", attitude_frame="GCRS", created_at=0, sample_count=0, samples_at_last_job=0
+            )
+        )
+        insert_samples(conn, 1, telemetry_to_rows(1, tel))
+    queue = "orbitcal-test-" + uuid.uuid4().hex[:8]
+    env = {
+        **os.environ,
+        "ORBITCAL_DATABASE_URL": url,
+        "ORBITCAL_BROKER_URL": "redis://127.0.0.1:6379/0",
+        "ORBITCAL_QUEUE": queue,
+        "ORBITCAL_SCHEDULER_TICK_S": "0.5",
+        "ORBITCAL_MIN_NEW_SAMPLES": "500",
+    }
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "orbitcal", "worker", "--scheduler"],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+    )
+    r = redis.Redis(host="127.0.0.1", port=6379, db=0)
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and r.llen(queue) == 0:
+            time.sleep(0.2)
+        died = proc.poll() is not None and proc.stderr is not None
+        assert r.llen(queue) == 1, proc.stderr.read() if died and proc.stderr else "no message"
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+        r.delete(queue)
+    with engine.connect() as conn:
+        jobs = conn.execute(sa.select(Job.status, Job.trigger)).all()
+    engine.dispose()
+    assert [tuple(j) for j in jobs] == [("queued", "schedule")]
