@@ -45,7 +45,6 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 def _batches(world: Any, rows_per_batch: int) -> list[tuple[bytes, str]]:
     """The telemetry in consecutive batches, cycling through the ingest formats."""
-    import numpy as np
     import pandas as pd
 
     from orbitcal import ccsds
@@ -78,7 +77,6 @@ def _batches(world: Any, rows_per_batch: int) -> list[tuple[bytes, str]]:
         else:
             text = df.to_json(orient="records", lines=True, double_precision=15)
             out.append((text.encode(), "application/x-ndjson"))
-    del np
     return out
 
 
