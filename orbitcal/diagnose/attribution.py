@@ -137,6 +137,12 @@ def _design(data: DiagnosisData, blocks: Sequence[DesignBlock]) -> tuple[FloatAr
         col += q
     x2 = x.reshape(3 * n, p)
     scale = np.sqrt(np.mean(x2**2, axis=0))
+    if p > 12:
+        # Effect columns are scaled by the part the calibration cannot absorb, so the ridge acts
+        # on what the data can tell apart (a time offset under a steady spin is mostly absorbed).
+        q, _ = np.linalg.qr(x2[:, :12])
+        eff = x2[:, 12:]
+        scale[12:] = np.sqrt(np.mean((eff - q @ (q.T @ eff)) ** 2, axis=0))
     scale[scale == 0.0] = 1.0
     return x2 / scale, scale
 
@@ -148,6 +154,8 @@ def fit_joint(
     *,
     robust: bool = True,
     iterations: int = 6,
+    ridge_effects: float = 1e-5,
+    huber_steps: int = 6,
 ) -> JointFit:
     """Fit the 12 calibration parameters and the effect parameters on the samples ``fit_mask``.
 
@@ -163,6 +171,13 @@ def fit_joint(
         Iteratively reweighted: two Huber steps (k = 2.5 sigma) then Tukey's bisquare
         (c = 4.685 sigma, sigma from the median absolute deviation), so samples of a localised
         disturbance (an auroral crossing) drop out of the calibration; else plain least squares.
+    iterations : int
+        Reweighting iterations.
+    ridge_effects : float
+        Ridge on the unit-scaled effect columns, relative to the number of rows [-].
+    huber_steps : int
+        Huber iterations before switching to Tukey's bisquare (default: Huber only; the bisquare
+        is for data with a localised disturbance far above the noise, e.g. a storm pass).
     """
     x_all, scale = _design(data, blocks)
     rows = np.repeat(fit_mask, 3)
@@ -172,7 +187,10 @@ def fit_joint(
     theta = np.zeros(x.shape[1])
     sigma = 1.0
     normal = np.eye(x.shape[1])
-    ridge = 1e-10 * np.eye(x.shape[1])
+    # A light ridge on the effect columns (unit-scaled, 1e-5 of their mean square) keeps nearly
+    # collinear regressors (e.g. a current bump sampled at only two local times) from exploding;
+    # the 12 calibration columns are left free.
+    ridge = np.diag(np.r_[np.full(12, 1e-10), np.full(x.shape[1] - 12, ridge_effects)])
     for it in range(iterations if robust else 1):
         xw = x * w[:, None]
         normal = x.T @ xw + ridge * x.shape[0]
@@ -185,7 +203,7 @@ def fit_joint(
         sigma = max(float(1.4826 * np.median(np.abs(r - np.median(r)))), 1e-6)
         if not robust or it == iterations - 1:
             break
-        if it < 2:
+        if it < huber_steps:
             u = np.abs(r) / (2.5 * sigma)  # Huber, k = 2.5 sigma
             w = np.where(u <= 1.0, 1.0, 1.0 / np.maximum(u, 1e-12))
         else:
@@ -435,6 +453,8 @@ def attribute(
         storm); held-out scoring still uses every held-out sample.
     """
     train, holdout, _ = time_blocks(data.t_utc_s, n_blocks=n_blocks, holdout_blocks=holdout_blocks)
+    if fit_mask is not None:
+        train = train & np.asarray(fit_mask, dtype=bool)
     if int(train.sum()) < 30 or int(holdout.sum()) < 2 * n_chunks:
         raise ValueError(
             f"too few samples for held-out attribution ({int(train.sum())} training, "
@@ -536,10 +556,16 @@ def attribute(
         fit, _, rms, p = single[name]
         effects.append(EffectScore(name, False, base_rms, rms, p, _params(fit, 0)))
 
+    if not selected:
+        absorbed = _absorbed_by_calibration(data, designs, base_rms, robust=robust)
+        if absorbed is not None:
+            selected.append(absorbed.name)
+            step_scores.append(absorbed)
+            effects = [absorbed] + [e for e in effects if e.name != absorbed.name]
     regional = _regional_fac(data, r_base, train, holdout, selected)
-    if regional is not None:
+    if regional is not None and regional.significant:
+        effects = [e for e in effects if e.name != regional.name]
         effects.insert(len(step_scores), regional)
-        effects = [e for e in effects if not (e.name == regional.name and not e.significant)]
     splits = split_fit_tests(data, robust=robust) if split_tests else []
     return Attribution(
         baseline_rms_nt=base_rms,
@@ -557,7 +583,60 @@ def attribute(
     )
 
 
-#: |magnetic latitude| above which field-aligned currents flow, and below which data are quiet [deg].
+def _absorbed_by_calibration(
+    data: DiagnosisData,
+    designs: dict[str, DesignBlock],
+    base_rms: float,
+    *,
+    robust: bool,
+    z_threshold: float = 5.0,
+    min_difference_nt: float = 1.0,
+) -> EffectScore | None:
+    """An effect the 12 parameters absorb whole, found by the sunlit/eclipse split fit.
+
+    Under nadir pointing a thermal or Sun-driven field can be absorbed by the biases so that the
+    residual stays flat and no held-out test sees it. The calibration is then fitted separately on
+    sunlit and eclipse samples: if the offsets disagree (z > ``z_threshold``), each candidate with
+    that witness (temperature, sun_driven) is added to both split fits, and the one that makes them
+    agree best -- removing at least two thirds of the disagreement -- is named.
+    """
+    lit: BoolArray | None = None
+    if data.illumination is not None:
+        lit = np.asarray(data.illumination > 0.5)
+    elif data.sunlit is not None:
+        lit = np.asarray(data.sunlit, dtype=bool)
+    if lit is None:
+        return None
+    kw: dict[str, Any] = {
+        "robust": robust,
+        "z_threshold": z_threshold,
+        "min_difference_nt": min_difference_nt,
+    }
+    masks = [lit, ~lit]
+    labels = ["sunlit", "eclipse"]
+    base = _split(data, masks, labels, "sunlit_vs_eclipse", **kw)
+    if base is None or not base.flagged:
+        return None
+    best: tuple[float, str, SplitFit] | None = None
+    for name in ("temperature", "sun_driven"):
+        if name not in designs:
+            continue
+        s = _split(data, masks, labels, "sunlit_vs_eclipse", blocks=[designs[name]], **kw)
+        if s is not None and (best is None or s.z < best[0]):
+            best = (s.z, name, s)
+    if best is None or best[0] > base.z / 3.0:
+        return None
+    z, name, s = best
+    params: dict[str, Any] = {
+        "judged_on": "split fits: the 12 parameters absorb it, the residual stays flat",
+        "split_offset_difference_nt": base.max_offset_difference_nt,
+        "split_z": base.z,
+        "split_z_with_effect": z,
+    }
+    return EffectScore(name, True, base_rms, base_rms, float("nan"), params, step=1)
+
+
+#: |magnetic latitude| above which field-aligned currents flow / below which data are quiet [deg].
 AURORAL_MLAT_DEG = 55.0
 QUIET_MLAT_DEG = 50.0
 
@@ -641,10 +720,11 @@ def _split(
     robust: bool,
     z_threshold: float,
     min_difference_nt: float,
+    blocks: Sequence[DesignBlock] = (),
 ) -> SplitFit | None:
     if len(masks) < 2 or any(int(m.sum()) < 30 for m in masks):
         return None
-    fits = [fit_joint(data, m, (), robust=robust) for m in masks]
+    fits = [fit_joint(data, m, blocks, robust=robust) for m in masks]
     offsets = np.array([f.o_nt for f in fits])
     var = []
     for f, m in zip(fits, masks, strict=True):

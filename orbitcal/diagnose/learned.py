@@ -62,7 +62,7 @@ def _net(theta: FloatArray, x: FloatArray, n_in: int) -> FloatArray:
     b1 = theta[n_in * h : n_in * h + h]
     w2 = theta[n_in * h + h : n_in * h + h + 3 * h].reshape(h, 3)
     b2 = theta[n_in * h + h + 3 * h :]
-    hidden = 1.0 / (1.0 + np.exp(-(x @ w1 + b1)))
+    hidden = 1.0 / (1.0 + np.exp(-np.clip(x @ w1 + b1, -50.0, 50.0)))
     return np.asarray(hidden @ w2 + b2)
 
 
@@ -73,7 +73,7 @@ def learned_field_error(
     train: BoolArray,
     holdout: BoolArray,
     rng: np.random.Generator | None = None,
-    max_nfev: int = 400,
+    max_nfev: int = 60,
 ) -> dict[str, Any]:
     """Fit the seed-003 model to a residual on ``train``; score it on ``holdout``.
 
