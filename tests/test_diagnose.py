@@ -1,4 +1,4 @@
-"""The diagnosis engine: catalogue, held-out attribution, split fits, report, CLI, blind benchmark."""
+"""The diagnosis: catalogue, held-out attribution, split fits, report, CLI, blind benchmark."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ from orbitcal.diagnose import CATALOGUE, EFFECT_NAMES, attribute
 from orbitcal.diagnose.api import diagnose_parts
 from orbitcal.diagnose.attribution import split_fit_tests
 from orbitcal.diagnose.report import report_html
+
 
 @pytest.fixture(autouse=True)
 def _single_thread_blas():  # type: ignore[no-untyped-def]
@@ -121,7 +122,8 @@ def test_report_has_the_contract_keys_and_html_renders() -> None:
         )
     where = report["where"]
     assert len(where["axis_rms_nt"]) == 3
-    assert {"magnetic_latitude", "local_time", "orbit_phase", "time", "sunlit_eclipse"} <= set(where)
+    assert {"magnetic_latitude", "local_time", "orbit_phase", "time"} <= set(where)
+    assert "sunlit_eclipse" in where
     assert report["learned"]["legendre_order"] == 3 and report["learned"]["hidden_nodes"] == 6
     page = report_html(report, data=world.data, attribution=att)
     assert page.count("data:image/png;base64,") >= 4
@@ -191,7 +193,9 @@ def test_reduced_blind_benchmark() -> None:
             effect=effect,
             magnitude=0.0 if effect == "none" else 1.0,
             attitude=attitude,
-            norad_id=39452 if effect == "field_aligned_currents" else int(rng.choice([39451, 39453])),
+            norad_id=39452
+            if effect == "field_aligned_currents"
+            else int(rng.choice([39451, 39453])),
             seed=int(rng.integers(0, 2**31 - 1)),
         )
         for i, (effect, attitude) in enumerate(
@@ -202,7 +206,9 @@ def test_reduced_blind_benchmark() -> None:
     summary = summarise(results)
     assert summary["cases"] == 24
     assert summary["false_alarm_rate"] == 0.0
-    assert summary["top1"] >= 0.75, [(r["effect"], r["verdict"]) for r in results if not r["correct"]]
+    missed = [(r["effect"], r["verdict"]) for r in results if not r["correct"]]
+    # 24 cases only (e.g. a thermal bias in continuous sunlight is a constant bias: undetectable)
+    assert summary["top1"] >= 0.75, missed
     assert summary["shrink_vs_oracle_mean"] >= 0.9
     counts = np.array(confusion_matrix(results)["counts"])
     assert counts.sum() == 24 and np.trace(counts) == round(summary["top1"] * 24)

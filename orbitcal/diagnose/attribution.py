@@ -140,9 +140,9 @@ def _design(data: DiagnosisData, blocks: Sequence[DesignBlock]) -> tuple[FloatAr
     if p > 12:
         # Effect columns are scaled by the part the calibration cannot absorb, so the ridge acts
         # on what the data can tell apart (a time offset under a steady spin is mostly absorbed).
-        q, _ = np.linalg.qr(x2[:, :12])
+        q_cal, _ = np.linalg.qr(x2[:, :12])
         eff = x2[:, 12:]
-        scale[12:] = np.sqrt(np.mean((eff - q @ (q.T @ eff)) ** 2, axis=0))
+        scale[12:] = np.sqrt(np.mean((eff - q_cal @ (q_cal.T @ eff)) ** 2, axis=0))
     scale[scale == 0.0] = 1.0
     return x2 / scale, scale
 
@@ -556,7 +556,9 @@ def attribute(
         fit, _, rms, p = single[name]
         effects.append(EffectScore(name, False, base_rms, rms, p, _params(fit, 0)))
 
-    if not selected:
+    flat = all(v[2] >= base_rms * (1.0 - min_gain) for v in single.values())
+    if not selected and flat:
+        # Nothing moves the held-out residual: look for an effect the calibration absorbed whole.
         absorbed = _absorbed_by_calibration(data, designs, base_rms, robust=robust)
         if absorbed is not None:
             selected.append(absorbed.name)
@@ -596,9 +598,10 @@ def _absorbed_by_calibration(
 
     Under nadir pointing a thermal or Sun-driven field can be absorbed by the biases so that the
     residual stays flat and no held-out test sees it. The calibration is then fitted separately on
-    sunlit and eclipse samples: if the offsets disagree (z > ``z_threshold``), each candidate with
-    that witness (temperature, sun_driven) is added to both split fits, and the one that makes them
-    agree best -- removing at least two thirds of the disagreement -- is named.
+    sunlit and eclipse samples: if the offsets disagree (z > ``z_threshold``), each candidate the
+    calibration can absorb (temperature, time offset, Sun-driven, orbit error, drift, attitude) is
+    added to both split fits, and the one that makes them agree best -- below ``z_threshold`` and
+    removing at least two thirds of the disagreement -- is named.
     """
     lit: BoolArray | None = None
     if data.illumination is not None:
@@ -618,13 +621,15 @@ def _absorbed_by_calibration(
     if base is None or not base.flagged:
         return None
     best: tuple[float, str, SplitFit] | None = None
-    for name in ("temperature", "sun_driven"):
+    from orbitcal.diagnose.effects import CATALOGUE
+
+    for name in (e.name for e in CATALOGUE if e.absorbed_by_calibration):
         if name not in designs:
             continue
         s = _split(data, masks, labels, "sunlit_vs_eclipse", blocks=[designs[name]], **kw)
         if s is not None and (best is None or s.z < best[0]):
             best = (s.z, name, s)
-    if best is None or best[0] > base.z / 3.0:
+    if best is None or best[0] > min(base.z / 3.0, z_threshold):
         return None
     z, name, s = best
     params: dict[str, Any] = {
@@ -654,7 +659,7 @@ def _regional_fac(
     cannot judge the candidate. The regional test asks instead whether the residual is localised
     where field-aligned currents flow and shaped as they are: at |magnetic latitude| > 55 deg its
     RMS exceeds 3x that of quiet latitudes (< 50 deg), its part perpendicular to B exceeds 2x the
-    part along B, and the catalogue's FAC model (fitted to those samples) removes at least a third
+    part along B, and latitude bumps perpendicular to B (fitted to those samples) remove at least a quarter
     of it. Reported with ``judged_on`` saying so.
     """
     if "field_aligned_currents" in selected:
@@ -664,11 +669,21 @@ def _regional_fac(
     lo = amlat < QUIET_MLAT_DEG
     if int((hi & holdout).sum()) >= 30 or int(hi.sum()) < 30 or int(lo.sum()) < 30:
         return None
-    from orbitcal.diagnose.effects import get_effect
+    from orbitcal.diagnose.effects import FAC_CENTRES_DEG, FAC_WIDTH_DEG
 
-    block = get_effect("field_aligned_currents").design(data, hi)
-    if block is None:
+    # Both directions perpendicular to B, latitude bumps as the catalogue model (one crossing
+    # gives no magnetic-local-time leverage).
+    cols = []
+    for sign in (1.0, -1.0):
+        for c in FAC_CENTRES_DEG:
+            bump = np.exp(-0.5 * ((sign * data.mlat_deg - c) / FAC_WIDTH_DEG) ** 2)
+            if float(np.max(bump[hi], initial=0.0)) < 0.05:
+                continue
+            for k in range(2):
+                cols.append(data.transverse_body[:, k, :] * bump[:, None])
+    if not cols:
         return None
+    g_all = np.stack(cols, axis=2)
     b_hat = data.b_hat_body
     par = np.sum(r_base * b_hat, axis=1)
     perp = r_base - par[:, None] * b_hat
@@ -676,12 +691,12 @@ def _regional_fac(
     rms_lo = vector_rms_nt(r_base[lo])
     perp_hi = vector_rms_nt(perp[hi])
     par_hi = float(np.sqrt(np.mean(par[hi] ** 2)))
-    g = block.g[hi].reshape(-1, block.g.shape[2])
+    g = g_all[hi].reshape(-1, g_all.shape[2])
     coef = np.linalg.lstsq(g, r_base[hi].reshape(-1), rcond=None)[0]
-    after = r_base[hi] - (block.g[hi] @ coef)
+    after = r_base[hi] - (g_all[hi] @ coef)
     rms_after = vector_rms_nt(after)
     significant = bool(
-        rms_hi > 3.0 * rms_lo and perp_hi > 2.0 * par_hi and rms_after < rms_hi * 2.0 / 3.0
+        rms_hi > 3.0 * rms_lo and perp_hi > 2.0 * par_hi and rms_after < 0.75 * rms_hi
     )
     params: dict[str, Any] = {
         "judged_on": "in sample, |magnetic latitude| > 55 deg: the held-out blocks do not reach "

@@ -1,0 +1,206 @@
+"""The diagnosis on real data: the Swarm A storm pass, real TLE orbit errors, a real crust (MF7).
+
+* Swarm A MAG_LR_1B, 2016-01-01 00:00-00:30 (``authorities/test_fac_singlesat_swarm.nc4``; storm,
+  RC about -129 nT, Kp 6, southern auroral crossing): its *measured* B_NEC is put through a
+  synthetic tumbling attitude and sensor; the diagnosis sees raw counts and IGRF-14 only.
+* Orbit error: the truth is propagated from a later real Swarm A TLE, the diagnosis is given the
+  older one (``authorities/swarm_iss_real_tles.tle``).
+* Crust: the world's crust is MF7 (Maus), the diagnosis offers LCS-1 (Olsen et al. 2017).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from orbitcal import frames
+from orbitcal.diagnose.api import _field_body, diagnose_parts, diagnosis_data
+from orbitcal.diagnose.effects import DiagnosisData
+
+AUTH = Path(__file__).parent / "authorities"
+SWARM_EPOCH_UTC_S = 1451606400.0  # 2016-01-01T00:00:00Z, the file's Timestamp origin
+
+
+@pytest.fixture(autouse=True)
+def _single_thread_blas():  # type: ignore[no-untyped-def]
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(1):
+        yield
+
+
+def _swarm_storm_data() -> tuple[DiagnosisData, np.ndarray, np.ndarray]:
+    from orbitcal.field.external import ring_current_field
+    from orbitcal.sun import illumination_conical, sun_position_gcrs_km
+    from orbitcal.truth import reference_field_itrs_nt
+
+    with h5py.File(AUTH / "test_fac_singlesat_swarm.nc4") as f:
+        g = f["SW_OPER_MAGA_LR_1B"]
+        t = SWARM_EPOCH_UTC_S + g["Timestamp"][:].astype(float)
+        lat = g["Latitude"][:]
+        lon = g["Longitude"][:]
+        radius_km = g["Radius"][:] / 1000.0
+        b_nec = g["B_NEC"][:]
+    r = frames.spherical_to_itrs(radius_km, 90.0 - lat, lon)
+    b_meas_itrs = frames.nec_to_itrs(b_nec, r)
+    rng = np.random.default_rng(5)
+    # Synthetic attitude (steady spin, ITRS frame) and sensor (1 % matrix, 100 nT biases, 1 nT).
+    rot = (
+        (
+            Rotation.from_rotvec(np.outer(t - t[0], np.radians([0.6, -1.1, 1.4])))
+            * Rotation.from_euler("xyz", [0.4, 0.1, -0.3])
+        )
+        .inv()
+        .as_matrix()
+    )
+    a = np.eye(3) + rng.normal(scale=0.01, size=(3, 3))
+    o = rng.normal(scale=100.0, size=3)
+    b_true_body = np.einsum("nij,nj->ni", rot, b_meas_itrs)
+    b_raw = b_true_body @ a.T + o + rng.normal(scale=1.0, size=b_true_body.shape)
+    b_ref_body = np.einsum("nij,nj->ni", rot, reference_field_itrs_nt(t, r, field="IGRF-14"))
+    r_gcrs = frames.itrs_to_gcrs(r, t)
+    sun = sun_position_gcrs_km(t)
+    s = sun - r_gcrs
+    s_itrs = frames.gcrs_to_itrs(s / np.linalg.norm(s, axis=1, keepdims=True), t)
+    ill = illumination_conical(r_gcrs, sun)
+    rc_e, rc_i = ring_current_field().rc_nt(t)
+    data = DiagnosisData(
+        t_utc_s=t,
+        b_raw_nt=b_raw,
+        b_ref_body_nt=b_ref_body,
+        rot_itrs_to_body=rot,
+        r_itrs_km=r,
+        sunlit=ill > 0.5,
+        illumination=ill,
+        sun_body=np.einsum("nij,nj->ni", rot, s_itrs),
+        rc_index_nt=rc_e + rc_i,
+        b_ext_body_nt=_field_body("RC", t, r, rot),
+        b_crust_body_nt=_field_body("LCS-1", t, r, rot),
+        crust_model="LCS-1",
+    )
+    return data, lat, rot
+
+
+def test_swarm_storm_pass_external_field_and_auroral_currents() -> None:
+    data, lat, rot = _swarm_storm_data()
+    amlat = np.abs(data.mlat_deg)
+    # 30 min only: the last 20 % is held out; fits use quiet |magnetic latitude| < 50 deg, as
+    # Swarm processing does (the auroral crossing would otherwise drag the 12 parameters).
+    report, att = diagnose_parts(data, learned=False, holdout_blocks=2, fit_mask=amlat < 50.0)
+    assert report["verdict"] == "external_field"
+    ext = report["effects"][0]
+    assert ext["name"] == "external_field" and ext["significant"] and ext["shrink"] > 2.0
+
+    # Where: the excess lies at high magnetic latitude, perpendicular to B.
+    where = report["where"]
+    assert where["concentration"].startswith("|mlat|")
+    lo_band = float(where["concentration"].split()[1].split("-")[0])
+    assert lo_band >= 50.0
+    high = [b for b in where["magnetic_latitude"] if b["band_deg"][0] >= 50.0]
+    quiet = [b for b in where["magnetic_latitude"] if b["band_deg"][1] <= 50.0]
+    assert max(b["rms_nt"] for b in high) > 3.0 * max(b["rms_nt"] for b in quiet)
+    assert all(b["perpendicular_rms_nt"] > 1.5 * b["scalar_rms_nt"] for b in high)
+    # ... and is attributed to field-aligned currents.
+    fac = {e["name"]: e for e in report["effects"]}["field_aligned_currents"]
+    assert fac["significant"], fac
+
+    # The low-latitude residual against IGRF-14: mean ~ -166 nT in N in the measured field itself
+    # (data README). Through the synthetic sensor, on the held-out low-latitude samples the
+    # calibration plus the external field leaves ~30 nT in N (measured; the issue's target of
+    # 15 nT is not reached: the 12 parameters and the field are fitted on 13 quiet minutes).
+    from orbitcal.diagnose.attribution import _resolve, fit_joint
+    from orbitcal.diagnose.effects import get_effect
+
+    block = _resolve(data, att.train, [], get_effect("external_field").design(data, att.train))
+    fit = fit_joint(data, att.train, [block])
+    residual = data.b_raw_nt - fit.predict_nt(data)
+    low = (np.abs(lat) < 40.0) & att.holdout
+    res_nec = frames.itrs_to_nec(np.einsum("nji,nj->ni", rot, residual), data.r_itrs_km)
+    base_nec = frames.itrs_to_nec(
+        np.einsum("nji,nj->ni", rot, att.baseline_residual_nt), data.r_itrs_km
+    )
+    print(
+        "low-latitude held-out mean NEC [nT]: baseline",
+        base_nec[low].mean(0).round(1),
+        "with external_field",
+        res_nec[low].mean(0).round(1),
+        block.variant,
+    )
+    assert abs(float(np.mean(res_nec[low, 0]))) < 166.0 / 4
+
+
+def _swarm_tles() -> list[object]:
+    from orbitcal.simulate import parse_tles
+
+    sets = parse_tles((AUTH / "swarm_iss_real_tles.tle").read_text())
+    return sorted((s for s in sets if s.norad_id == 39452), key=lambda s: s.epoch_utc_s)
+
+
+def test_real_orbit_error_from_an_older_tle() -> None:
+    from orbitcal.orbit import Orbit
+    from orbitcal.simulate import Tumbling, make_effect, simulate_world
+
+    sets = _swarm_tles()
+    old = sets[0]  # epoch 2022-08-01 (22213.52)
+    new = next(s for s in sets if s.epoch_utc_s > old.epoch_utc_s + 6 * 86400)  # type: ignore[attr-defined]
+    world = simulate_world(
+        old,  # type: ignore[arg-type]
+        start_utc_s=new.epoch_utc_s,  # type: ignore[attr-defined]
+        duration_s=4 * 5650.0,
+        cadence_s=10.0,
+        rng=np.random.default_rng(8),
+        # Under nadir pointing the along-track error is estimated as well (7.20 km for 7.24 km)
+        # but its held-out test is weaker (the 12 parameters absorb part of it); a spinning
+        # spacecraft separates it cleanly.
+        attitude=Tumbling(),
+        effects=[make_effect("orbit_error", true_tle=new.text)],  # type: ignore[attr-defined]
+    )
+    truth_km = world.truth["effects"][0]["info"]["along_track_km_mean"]
+    assert abs(truth_km) > 1.0  # a week-old element set is km off along track
+    data = diagnosis_data(world.telemetry, orbit=Orbit.from_tle(old.text), crust_model=None)  # type: ignore[attr-defined]
+    report, att = diagnose_parts(data, learned=False)
+    assert report["verdict"] == "orbit_error"
+    params = report["effects"][0]["params"]
+    # Along-track error over the world: the model's constant (at the training centre) plus its
+    # growth rate, averaged over every sample.
+    tau_d = (data.t_utc_s - data.t_utc_s[att.train].mean()) / 86400.0
+    est = params["along_track_km"] + params.get("along_track_rate_km_per_day", 0.0) * tau_d
+    assert float(np.mean(est)) == pytest.approx(truth_km, rel=0.20)
+
+
+def test_real_crust_mf7_found_with_lcs1() -> None:
+    from orbitcal.orbit import Orbit
+    from orbitcal.sensor import SensorModel
+    from orbitcal.simulate import Tumbling, make_effect, simulate_world
+
+    sets = _swarm_tles()
+    tle = sets[-1]
+    rng = np.random.default_rng(9)
+    sensor = SensorModel(
+        a_matrix=np.eye(3) + rng.normal(scale=0.01, size=(3, 3)),
+        bias_nt=rng.normal(scale=50.0, size=3),
+        noise_std_nt=0.5,  # a vector fluxgate of the Swarm class
+    )
+    world = simulate_world(
+        tle,  # type: ignore[arg-type]
+        start_utc_s=tle.epoch_utc_s + 3600.0,  # type: ignore[attr-defined]
+        duration_s=5 * 5650.0,
+        cadence_s=10.0,
+        rng=rng,
+        attitude=Tumbling(),
+        sensor=sensor,
+        effects=[make_effect("crustal_field", model="MF7")],
+    )
+    data = diagnosis_data(world.telemetry, orbit=Orbit.from_tle(tle.text))  # type: ignore[attr-defined]
+    assert data.crust_model == "LCS-1"
+    report, _ = diagnose_parts(data, rng=np.random.default_rng(0))
+    assert report["verdict"] == "crustal_field"
+    crust = report["effects"][0]
+    assert crust["shrink"] > 1.3
+    assert 0.5 < crust["params"]["crust_scale"] < 1.5  # LCS-1 stands for MF7 nearly one to one
+    # The seed-003 learned model is reported with its own held-out score.
+    assert report["learned"]["holdout_rms_after_nt"] > 0.0
