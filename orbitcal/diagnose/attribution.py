@@ -659,8 +659,8 @@ def _regional_fac(
     cannot judge the candidate. The regional test asks instead whether the residual is localised
     where field-aligned currents flow and shaped as they are: at |magnetic latitude| > 55 deg its
     RMS exceeds 3x that of quiet latitudes (< 50 deg), its part perpendicular to B exceeds 2x the
-    part along B, and latitude bumps perpendicular to B (fitted to those samples) remove at least a quarter
-    of it. Reported with ``judged_on`` saying so.
+    part along B, and latitude bumps perpendicular to B (fitted to those samples) remove at least
+    a quarter of it. Reported with ``judged_on`` saying so.
     """
     if "field_aligned_currents" in selected:
         return None
