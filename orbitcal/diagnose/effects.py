@@ -566,11 +566,12 @@ def _design_fac(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
         return None
     east = data.transverse_body[:, 0, :]
     phi = data.mlt_angle_rad
-    # Region-1/2 currents reverse between dawn and dusk: each latitude bump is modulated by
-    # 1, sin and cos of the magnetic local time angle (when the Sun direction is known).
+    # Region-1/2 currents reverse between dawn and dusk: each latitude bump is modulated by sin
+    # and cos of the magnetic local time angle (when the Sun direction is known); two passes at
+    # different local times are fitted exactly, and a constant term would be collinear with them.
     mods = {"": np.ones(data.n)}
     if phi is not None:
-        mods = {"": np.ones(data.n), "_sin_mlt": np.sin(phi), "_cos_mlt": np.cos(phi)}
+        mods = {"_sin_mlt": np.sin(phi), "_cos_mlt": np.cos(phi)}
     cols = []
     names = []
     for hemi, sign in (("n", 1.0), ("s", -1.0)):
