@@ -142,6 +142,15 @@ def learned_field_error(
 
     sol = least_squares(fun, theta0, method="lm", max_nfev=max_nfev)
     net = _net(sol.x, x, n_in) * y_scale
+    # A regional model (the patent's region S): no correction outside the training box of
+    # position and inputs -- it does not extrapolate.
+    lo_in = xt.min(axis=0)
+    hi_in = xt.max(axis=0)
+    pad = 0.02 * (hi_in - lo_in)
+    inside = np.all((x >= lo_in - pad) & (x <= hi_in + pad), axis=1)
+    inside &= (lat >= lo_lat) & (lat <= hi_lat) & (lon >= lo_lon) & (lon <= hi_lon)
+    net[~inside] = 0.0
+    leg[~inside] = 0.0
 
     def body(v_nec: FloatArray) -> FloatArray:
         v_itrs = np.einsum("nji,nj->ni", basis, v_nec)
@@ -163,6 +172,7 @@ def learned_field_error(
         "holdout_rms_legendre_nt": after_leg,
         "holdout_rms_after_nt": after,
         "shrink": before / max(after, 1e-12),
+        "holdout_fraction_inside_region": float(np.mean(inside[holdout])) if holdout.any() else 0.0,
         "legendre_coefficients_nt": {
             comp: coef[:, k].round(4).tolist() for k, comp in enumerate(("N", "E", "C"))
         },
