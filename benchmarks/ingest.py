@@ -244,6 +244,7 @@ def main() -> None:
         "ORBITCAL_ADMIN_KEY": key,
         "ORBITCAL_SQLITE_SYNCHRONOUS": args.synchronous,
         "ORBITCAL_SCHEDULER": "false",
+        "ORBITCAL_RATE_LIMIT_PER_S": "0",  # measure the service, not the limiter
         "ORBITCAL_LOG_LEVEL": "WARNING",
     }
     server = subprocess.Popen(

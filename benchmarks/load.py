@@ -90,6 +90,7 @@ def start_server(db: Path, port: int, admin_key: str, log: Path) -> subprocess.P
         **os.environ,
         "ORBITCAL_ADMIN_KEY": admin_key,
         "ORBITCAL_LOG_LEVEL": "WARNING",
+        "ORBITCAL_RATE_LIMIT_PER_S": "0",  # measure the service, not the limiter
         "PYTHONPATH": str(REPO),
     }
     return subprocess.Popen(

@@ -80,38 +80,11 @@ def _packets_to_frame(decoded: ccsds.DecodedPackets) -> pd.DataFrame:
     return pd.DataFrame(cols)
 
 
-def _cut_leading_null_lines(body: bytes) -> tuple[list[RowError], bytes]:
-    """Reject and cut off leading NDJSON lines that start with ``null``.
-
-    pyarrow 26's JSON reader (the NDJSON fast path of ``parse_telemetry``) crashes the whole
-    process with a segmentation fault when the body's first value is ``null`` (found by
-    tests/reliability/test_properties.py); such a line is never a sample anyway.
-    """
-    rejected: list[RowError] = []
-    while True:
-        rest = body[3:] if body.startswith(b"\xef\xbb\xbf") else body
-        rest = rest.lstrip(b" \t\r\n")
-        if not rest.startswith(b"null"):
-            return rejected, body
-        line, _, body = rest.partition(b"\n")
-        is_null = line.strip() == b"null"
-        reason = "line is not a JSON object" if is_null else "line is not valid JSON"
-        rejected.append(RowError(len(rejected), reason))
-
-
 def parse_body(body: bytes, *, fmt: str, time_scale: str, apid: int | None = None) -> ParsedUpload:
     """Validate an upload; row numbers in ``rejected`` are 0-based rows (packets for CCSDS).
 
     Raises ``TelemetryError`` / ``ccsds.PacketError`` when nothing can be read at all.
     """
-    if fmt == "ndjson":
-        cut, body = _cut_leading_null_lines(body)
-        if cut:
-            if not body.strip():
-                return ParsedUpload(Telemetry(t_utc_s=np.empty(0), b_raw_nt=np.empty((0, 3))), cut)
-            result = parse_telemetry(body, fmt="ndjson", time_scale=time_scale)
-            shifted = [RowError(e.row + len(cut), e.reason) for e in result.rejected]
-            return ParsedUpload(result.telemetry, cut + shifted)
     if fmt != "ccsds":
         result = parse_telemetry(body, fmt=fmt, time_scale=time_scale)  # type: ignore[arg-type]
         return ParsedUpload(result.telemetry, list(result.rejected))

@@ -31,9 +31,10 @@ class Settings(BaseSettings):
     #: Address the server is bound to (set by ``orbitcal serve``), used for the loopback check.
     bind_host: str = "127.0.0.1"
 
-    #: Per-key rate limit [requests/s] and burst (``service.ratelimit``); 0 turns it off.
-    rate_limit_per_s: float = Field(default=0.0, ge=0)
-    rate_limit_burst: int = Field(default=200, ge=1)
+    #: Per-key rate limit [requests/s] and burst (``service.ratelimit``); 0 turns it off. On by
+    #: default with room for a busy ground station (uploads come in batches of 10^3–10^5 rows).
+    rate_limit_per_s: float = Field(default=200.0, ge=0)
+    rate_limit_burst: int = Field(default=1000, ge=1)
 
     #: Largest request body accepted [bytes]; larger ones get 413.
     max_body_bytes: int = 64 * 1024 * 1024
