@@ -1,8 +1,8 @@
 """The ``orbitcal`` command: one module per sub-command, each exposing ``register(subparsers)``.
 
-A sub-command module defines ``register(sub: argparse._SubParsersAction) -> None`` which adds its
-parser and sets ``func=<callable(args) -> int>`` as default. Bad input exits non-zero with a one-line
-reason on stderr (CONTRACT section 2).
+A sub-command module defines ``register(sub: argparse._SubParsersAction) -> None`` which adds
+its parser and sets ``func=<callable(args) -> int>`` as default. Bad input exits non-zero with a
+one-line reason on stderr (CONTRACT section 2).
 """
 
 from __future__ import annotations

@@ -8,7 +8,8 @@ the table.
 from __future__ import annotations
 
 import argparse
-import sys
+
+from orbitcal.cli._inputs import add_table_arguments, load_table
 
 __all__ = ["register", "run"]
 
@@ -21,22 +22,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         description="Apply a calibration document (CONTRACT section 4) to a telemetry table.",
     )
     p.add_argument("calibration", metavar="CAL.json", help="calibration document")
-    p.add_argument(
-        "telemetry", metavar="TELEMETRY", help="telemetry table (.csv/.parquet/.ndjson/.json)"
+    add_table_arguments(
+        p,
+        tle=False,
+        attitude_help="accepted for symmetry with the other commands; apply needs no attitude",
     )
     p.add_argument("--out", required=True, metavar="OUT.csv", help="output CSV")
-    p.add_argument(
-        "--time-scale",
-        default="UTC",
-        choices=("UTC", "TAI", "GPS"),
-        help="time scale of the table's times (default UTC)",
-    )
-    p.add_argument(
-        "--attitude-frame",
-        default="GCRS",
-        choices=("GCRS", "ITRS"),
-        help="accepted for symmetry with the other commands; apply needs no attitude",
-    )
     p.set_defaults(func=run)
 
 
@@ -45,23 +36,13 @@ def run(args: argparse.Namespace) -> int:
     from orbitcal.calibrate.document import read_document
     from orbitcal.cli import CliError
     from orbitcal.pipeline import apply_document
-    from orbitcal.telemetry import read_telemetry, write_field_csv
+    from orbitcal.telemetry import write_field_csv
 
     try:
         doc = read_document(args.calibration)
     except OSError as exc:
         raise CliError(f"cannot read {args.calibration}: {exc.strerror}") from None
-    result = read_telemetry(args.telemetry, time_scale=args.time_scale)
-    tel = result.telemetry
-    if result.rejected:
-        first = result.rejected[0]
-        print(
-            f"orbitcal apply: {len(result.rejected)} rows rejected (first: row {first.row}: "
-            f"{first.reason}); the {len(tel)} valid rows are used",
-            file=sys.stderr,
-        )
-    if len(tel) == 0:
-        raise CliError(f"{args.telemetry}: no valid rows")
+    tel = load_table(args, "apply")
     b_cal = apply_document(doc, tel)
     write_field_csv(args.out, tel.t_utc_s, b_cal)
     return 0

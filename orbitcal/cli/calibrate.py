@@ -9,9 +9,10 @@ stderr.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 from typing import Any
+
+from orbitcal.cli._inputs import add_field_argument, add_table_arguments, load_orbit, load_table
 
 __all__ = ["register", "run"]
 
@@ -30,10 +31,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
             f"(CONTRACT section 4). Methods: {methods}."
         ),
     )
-    p.add_argument(
-        "telemetry", metavar="TELEMETRY", help="telemetry table (.csv/.parquet/.ndjson/.json)"
-    )
-    p.add_argument("--tle", metavar="TLE", help="file with one TLE (needed without r_x,r_y,r_z)")
+    add_table_arguments(p)
+    add_field_argument(p)
     p.add_argument(
         "--method",
         default=DEFAULT_METHOD,
@@ -41,21 +40,6 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help=f"calibration method (default {DEFAULT_METHOD}): {', '.join(METHODS)}",
     )
     p.add_argument("--out", required=True, metavar="CAL.json", help="output document")
-    p.add_argument(
-        "--attitude-frame",
-        default="GCRS",
-        choices=("GCRS", "ITRS"),
-        help="frame the quaternions refer to (default GCRS)",
-    )
-    p.add_argument(
-        "--time-scale",
-        default="UTC",
-        choices=("UTC", "TAI", "GPS"),
-        help="time scale of the table's times (default UTC)",
-    )
-    p.add_argument(
-        "--field", default="IGRF-14", metavar="NAME", help="reference field (default IGRF-14)"
-    )
     p.add_argument(
         "--holdout-fraction",
         type=float,
@@ -76,39 +60,6 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.set_defaults(func=run)
 
 
-def _load(args: argparse.Namespace, command: str) -> tuple[Any, Any]:
-    """Read the table (reporting rejected rows) and the orbit when one is needed."""
-    from orbitcal.cli import CliError
-    from orbitcal.telemetry import read_telemetry
-
-    result = read_telemetry(args.telemetry, time_scale=args.time_scale)
-    tel = result.telemetry
-    if result.rejected:
-        first = result.rejected[0]
-        print(
-            f"orbitcal {command}: {len(result.rejected)} rows rejected (first: row {first.row}: "
-            f"{first.reason}); the {len(tel)} valid rows are used",
-            file=sys.stderr,
-        )
-    if len(tel) == 0:
-        raise CliError(f"{args.telemetry}: no valid rows")
-    orbit = None
-    tle = getattr(args, "tle", None)
-    if tle:
-        from orbitcal.orbit import Orbit
-
-        try:
-            text = Path(tle).read_text()
-        except OSError as exc:
-            raise CliError(f"cannot read TLE file {tle}: {exc.strerror}") from None
-        orbit = Orbit.from_tle(text)
-    elif tel.r_itrs_km is None:
-        raise CliError(
-            f"{args.telemetry} has no positions (r_x, r_y, r_z): give the spacecraft's --tle"
-        )
-    return tel, orbit
-
-
 def run(args: argparse.Namespace) -> int:
     """Execute ``orbitcal calibrate``."""
     import numpy as np
@@ -120,7 +71,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.method not in METHODS:
         raise CliError(f"unknown method {args.method!r}; known: {', '.join(METHODS)}")
-    tel, orbit = _load(args, "calibrate")
+    tel = load_table(args, "calibrate")
+    orbit = load_orbit(args, tel)
     spacecraft = args.spacecraft or (getattr(orbit, "name", "") or Path(args.telemetry).stem)
 
     def fit(progress: Any) -> tuple[Any, dict[str, Any]]:

@@ -1,0 +1,103 @@
+"""Arguments and input loading shared by the commands that read telemetry (CONTRACT section 2).
+
+Every command that reads telemetry accepts the section-1 formats by extension,
+``--attitude-frame GCRS|ITRS`` (default GCRS) and ``--time-scale UTC|TAI|GPS`` (default UTC);
+``--tle`` may be left out when the table carries positions.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from orbitcal.orbit import Orbit
+    from orbitcal.telemetry import Telemetry
+
+__all__ = ["add_field_argument", "add_table_arguments", "load_orbit", "load_table"]
+
+
+def add_table_arguments(
+    p: argparse.ArgumentParser, *, tle: bool = True, attitude_help: str | None = None
+) -> None:
+    """Add ``TELEMETRY`` and the options every telemetry-reading command shares."""
+    p.add_argument(
+        "telemetry", metavar="TELEMETRY", help="telemetry table (.csv/.parquet/.ndjson/.json)"
+    )
+    if tle:
+        p.add_argument(
+            "--tle", metavar="TLE", help="file with one TLE (needed without r_x,r_y,r_z)"
+        )
+    p.add_argument(
+        "--attitude-frame",
+        default="GCRS",
+        choices=("GCRS", "ITRS"),
+        help=attitude_help or "frame the quaternions refer to (default GCRS)",
+    )
+    p.add_argument(
+        "--time-scale",
+        default="UTC",
+        choices=("UTC", "TAI", "GPS"),
+        help="time scale of the table's times (default UTC)",
+    )
+
+
+def add_field_argument(p: argparse.ArgumentParser) -> None:
+    """Add ``--field NAME`` (default IGRF-14)."""
+    p.add_argument(
+        "--field",
+        default="IGRF-14",
+        metavar="NAME",
+        help="reference field, terms joined by '+', e.g. IGRF-14, IGRF-13, CHAOS-8.1+LCS-1+RC "
+        "(default IGRF-14)",
+    )
+
+
+def load_table(
+    args: argparse.Namespace, command: str, *, need_attitude: str | None = None
+) -> Telemetry:
+    """Read the table, report rejected rows on stderr, and refuse an empty or unusable one.
+
+    ``need_attitude`` is the reason the command needs quaternions (None: it does not).
+    """
+    from orbitcal.cli import CliError
+    from orbitcal.telemetry import read_telemetry
+
+    result = read_telemetry(args.telemetry, time_scale=args.time_scale)
+    tel = result.telemetry
+    if result.rejected:
+        first = result.rejected[0]
+        print(
+            f"orbitcal {command}: {len(result.rejected)} rows rejected (first: row {first.row}: "
+            f"{first.reason}); the {len(tel)} valid rows are used",
+            file=sys.stderr,
+        )
+    if len(tel) == 0:
+        raise CliError(f"{args.telemetry}: no valid rows")
+    if need_attitude and tel.q_wxyz is None:
+        raise CliError(
+            f"{args.telemetry}: no quaternion columns q_w, q_x, q_y, q_z: {need_attitude}"
+        )
+    return tel
+
+
+def load_orbit(args: argparse.Namespace, tel: Telemetry) -> Orbit | None:
+    """The orbit from ``--tle`` (None when the table carries positions and no TLE is given)."""
+    from orbitcal.cli import CliError
+
+    tle = getattr(args, "tle", None)
+    if not tle:
+        if tel.r_itrs_km is None:
+            raise CliError(
+                f"{args.telemetry} has no positions (r_x, r_y, r_z): give the spacecraft's --tle"
+            )
+        return None
+    from orbitcal.orbit import Orbit
+
+    try:
+        text = Path(tle).read_text()
+    except OSError as exc:
+        raise CliError(f"cannot read TLE file {tle}: {exc.strerror}") from None
+    return Orbit.from_tle(text)
