@@ -31,7 +31,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--days", type=float, default=2.0, help="simulated span [days] (default 2)")
-    p.add_argument("--method", default="linear", help="calibration method (default linear)")
+    p.add_argument(
+        "--method",
+        default="lmbp-hk",
+        help="calibration method (default lmbp-hk: the LM-trained BP network with housekeeping "
+        "inputs and a linear path)",
+    )
     p.add_argument("--seed", type=int, default=2020, help="simulation seed")
     p.add_argument("--port", type=int, default=0, help="port (default: any free port)")
     p.add_argument("--dir", metavar="DIR", help="keep the database here (default: a temp dir)")
