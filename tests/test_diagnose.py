@@ -40,6 +40,29 @@ CONTRACT_EFFECTS = {
 }
 
 
+def test_public_api_is_pinned() -> None:
+    import orbitcal.diagnose as d
+
+    assert sorted(d.__all__) == sorted(
+        [
+            "CATALOGUE",
+            "EFFECT_NAMES",
+            "Attribution",
+            "DiagnosisData",
+            "Effect",
+            "EffectScore",
+            "SplitFit",
+            "attribute",
+            "build_report",
+            "diagnose",
+            "diagnose_data",
+            "diagnosis_data",
+            "report_html",
+        ]
+    )
+    assert all(hasattr(d, name) for name in d.__all__)
+
+
 def test_catalogue_has_one_model_per_contract_effect() -> None:
     assert set(EFFECT_NAMES) | {"none"} == CONTRACT_EFFECTS
     assert len({e.name for e in CATALOGUE}) == len(CATALOGUE) == 11

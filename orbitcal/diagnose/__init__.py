@@ -6,8 +6,10 @@ engine underneath works on plain arrays (:class:`DiagnosisData`, :func:`attribut
 
 from __future__ import annotations
 
+from orbitcal.diagnose.api import diagnose, diagnose_data, diagnosis_data
 from orbitcal.diagnose.attribution import Attribution, EffectScore, SplitFit, attribute
 from orbitcal.diagnose.effects import CATALOGUE, EFFECT_NAMES, DiagnosisData, Effect
+from orbitcal.diagnose.report import build_report, report_html
 
 __all__ = [
     "CATALOGUE",
@@ -18,4 +20,9 @@ __all__ = [
     "EffectScore",
     "SplitFit",
     "attribute",
+    "build_report",
+    "diagnose",
+    "diagnose_data",
+    "diagnosis_data",
+    "report_html",
 ]
