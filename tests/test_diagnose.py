@@ -235,3 +235,26 @@ def test_reduced_blind_benchmark() -> None:
     assert summary["shrink_vs_oracle_mean"] >= 0.9
     counts = np.array(confusion_matrix(results)["counts"])
     assert counts.sum() == 24 and np.trace(counts) == round(summary["top1"] * 24)
+
+
+def test_public_diagnose_on_telemetry() -> None:
+    """``diagnose(telemetry, orbit=...)``: the call behind GET /v1/spacecraft/{id}/diagnosis."""
+    from orbitcal.diagnose import diagnose
+    from orbitcal.orbit import Orbit
+    from orbitcal.simulate import NadirLVLH, make_effect, select_tle, simulate_world
+
+    tle_text = (Path(__file__).parent / "authorities" / "swarm_iss_real_tles.tle").read_text()
+    tle = select_tle(tle_text, norad_id=39451, at_utc_s=1.66e9)
+    world = simulate_world(
+        tle,
+        start_utc_s=tle.epoch_utc_s + 7200.0,
+        duration_s=4 * 5600.0,
+        cadence_s=10.0,
+        rng=np.random.default_rng(3),
+        attitude=NadirLVLH(),
+        effects=[make_effect("nonlinearity")],
+    )
+    report = diagnose(world.telemetry, orbit=Orbit.from_tle(tle.text), rng=np.random.default_rng(0))
+    assert report["verdict"] == "nonlinearity"
+    assert report["baseline"]["method"] == "linear-12"
+    assert report["effects"][0]["holdout_rms_after_nt"] < report["baseline"]["holdout_rms_nt"]
