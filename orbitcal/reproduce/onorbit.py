@@ -1,15 +1,17 @@
-"""The on-orbit comparison scenario: a Swarm TLE, IGRF-14, a sensor with injectable effects.
+"""The on-orbit comparison scenario, built with the team's simulator (:mod:`orbitcal.simulate`).
 
 A spacecraft on a real TLE (Swarm A, NORAD 39452, CelesTrak, ``tests/authorities``) flies a
-tumbling or nadir-pointing attitude; the true field is IGRF-14 along the SGP4 track rotated into the
-body frame by orbitcal's own truth pipeline; the magnetometer follows Wang et al. (2020) eq. 1,
-``b_raw = A b + b0 + ε``, plus — when asked — a temperature-driven bias ``k_T (T − T0)`` and a
-magnetorquer field ``K_mtq m`` (the housekeeping effects of CONTRACT section 5). The same table is
-what a real spacecraft would send: times, raw field, quaternions, temperature, ``mtq_*``.
+tumbling or nadir-pointing attitude profile; :func:`orbitcal.simulate.simulate_world` propagates
+it, evaluates IGRF-14 along the track in body axes, produces the housekeeping (orbital thermal
+cycle, B-dot magnetorquer commands), injects the catalogue's ``temperature`` and ``magnetorquer``
+effects when asked, and measures through :class:`orbitcal.sensor.SensorModel` (Wang et al. 2020
+eq. 1). This module only chooses the scenario's parameters and keeps the comparison's view of the
+result (:class:`OrbitWorld`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,6 +22,7 @@ from orbitcal.telemetry import Telemetry
 
 __all__ = [
     "SWARM_A_TLE",
+    "TEMPERATURE_BIAS_NT_PER_C",
     "OrbitWorld",
     "orbit_world",
     "write_tle",
@@ -27,11 +30,18 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-# Swarm A (NORAD 39452), CelesTrak element set of 2022-08-01, copied verbatim from
-# tests/authorities/swarm_iss_real_tles.tle (provenance in tests/authorities/README.md).
+# Swarm A (NORAD 39452), CelesTrak element set of 2023-11-19, copied verbatim from
+# tests/authorities/swarm_iss_real_tles.tle (provenance in tests/authorities/README.md). An eclipse
+# season: the simulator's orbital thermal cycle swings 11-31 °C. (The 2022-08-01 sets there are
+# eclipse-free: the temperature stays within 1 °C and its coupling is not observable.)
 SWARM_A_TLE = """SWARM A
-1 39452U 13067B   22213.51971877  .00001645  00000+0  50768-4 0  9990
-2 39452  87.3611 208.4349 0002354 100.1496 260.0021 15.32769581488835"""
+1 39452U 13067B   23323.56602589  .00004670  00000+0  16430-3 0  9997
+2 39452  87.3479  38.6206 0002885 107.3945 252.7620 15.29072398561541"""
+
+#: Temperature coefficient of the offset in this scenario, body axes [nT/°C].
+TEMPERATURE_BIAS_NT_PER_C: tuple[float, float, float] = (2.0, -1.5, 1.0)
+#: Magnetorquer saturation dipole of this scenario's spacecraft [A·m²].
+MTQ_MAX_AM2 = 8.0
 
 
 @dataclass(frozen=True)
@@ -41,16 +51,18 @@ class OrbitWorld:
     Attributes
     ----------
     telemetry
-        The contract table (no positions: they come from the TLE).
+        The contract table (no positions: they come from the TLE): times, raw field, quaternions
+        and, when an effect couples to them, ``temperature`` and ``mtq_x..z``.
     tle
         The TLE text used.
     b_true_body_nt
-        True (reference) field in the body frame, ``(N, 3)`` [nT].
+        Reference field (IGRF-14) in the body frame, ``(N, 3)`` [nT]: the calibration target.
     a_matrix, bias_nt
         The sensor's ``A`` and ``b0`` [nT].
     k_hk_nt
-        ``(3, k)`` housekeeping coupling [nT per regressor unit] in the order of
-        ``Telemetry.regressors()`` (temperature first, then ``mtq_x..z``), zeros when absent.
+        ``(3, k)`` housekeeping coupling in raw-reading space [nT per regressor unit] in the order
+        of ``Telemetry.regressors()`` (temperature first, then ``mtq_x..z``): ``A [k_b | C]``, the
+        ``K`` of ``b_raw = A b + b0 + K x_hk`` (:mod:`orbitcal.calibrate.linear`).
     noise_std_nt
         σ of the white noise [nT].
     """
@@ -77,81 +89,94 @@ def orbit_world(
     a_matrix: FloatArray | None = None,
     bias_nt: FloatArray | None = None,
 ) -> OrbitWorld:
-    """Simulate ``n_samples`` every ``dt_s`` from the TLE epoch.
+    """Simulate ``n_samples`` every ``dt_s`` from the TLE epoch with ``orbitcal.simulate``.
 
     Parameters
     ----------
     attitude
-        ``"tumbling"`` (constant skew body rate), ``"nadir"`` (LVLH) or ``"inertial"``.
+        Profile name of :func:`orbitcal.simulate.attitude_profile`: ``"tumbling"``, ``"nadir"``
+        or ``"inertial"``.
     noise_std_nt
         White noise σ per axis [nT].
     temperature
-        Sensor temperature swinging ±10 °C around 20 °C with the orbit (eclipse-like, with an
-        orbit-to-orbit wander), coupled into the reading at ``k_T = [2.0, −1.5, 1.0]`` nT/°C.
+        Inject the catalogue's ``temperature`` effect (driven by the simulator's orbital thermal
+        cycle, ±10 °C in eclipse seasons) with offset coefficients
+        :data:`TEMPERATURE_BIAS_NT_PER_C` and **no scale-factor term** (``scale_per_c = 0``):
+        the effect is then exactly an additive regressor, as the comparison "LM-BP with
+        housekeeping vs linear + the same regressors" states. (The simulator's default also
+        drifts the scale factor, ``k_s ⊙ B ΔT``, which additive regressors cannot represent;
+        ``benchmarks/lm.py`` and ``tests/test_pipeline.py`` show that case separately.) Adds the
+        ``temperature`` column.
     magnetorquer
-        Piecewise-constant dipole commands (±8 A·m², changed every 2-5 min), coupled at ~10-40 nT
-        per A·m².
+        Inject the catalogue's ``magnetorquer`` effect on the simulator's gated B-dot commands
+        (saturation :data:`MTQ_MAX_AM2` A·m²), coupling 10–40 nT per A·m² with random signs drawn
+        from ``rng``. Adds the ``mtq_x, mtq_y, mtq_z`` columns.
     rng
-        Seeded generator (noise, commands, sensor parameters when not given).
+        Seeded generator: sensor parameters (when not given), couplings, and the simulator's
+        own generator (housekeeping, noise) are all drawn from it.
+    tle
+        TLE text (two or three lines).
     a_matrix, bias_nt
-        Sensor ``A`` and ``b0`` [nT]; default: a random plausible fluxgate (3 % scale, 0.5°
+        Sensor ``A`` and ``b0`` [nT]; default ``SensorModel.random`` (3 % scale, 0.5°
         misalignment, 500 nT bias).
+
+    Notes
+    -----
+    Columns a spacecraft would send but nothing here couples to (the solar-array current, and
+    temperature / magnetorquer commands when their effect is off) are left out of the table, so
+    the ``-hk`` methods see exactly the regressors of the injected effects.
     """
-    from orbitcal.frames import itrs_to_gcrs
-    from orbitcal.orbit import Orbit
-    from orbitcal.simulate.attitude_profiles import attitude_profile
-    from orbitcal.truth import truth_body_nt
+    from orbitcal.sensor import SensorModel
+    from orbitcal.simulate import attitude_profile, make_effect, simulate_world
+    from orbitcal.simulate.effects import Effect
+    from orbitcal.simulate.world import Housekeeping, parse_tles
 
-    orbit = Orbit.from_tle(tle)
-    t = orbit.epoch_utc_s + dt_s * np.arange(n_samples, dtype=np.float64)
-    eph = orbit.propagate(t).require_valid()
-    r_gcrs = itrs_to_gcrs(eph.r_itrs_km, t)
-    omega = np.array([0.0, 0.0, 7.2921150e-5])  # Earth rotation [rad/s] (IERS)
-    v_gcrs = itrs_to_gcrs(eph.v_itrs_km_s + np.cross(omega, eph.r_itrs_km), t)
-    profile = attitude_profile(attitude)
-    q = profile.q_wxyz(t, r_gcrs, v_gcrs)
-    b_true = truth_body_nt(t, eph.r_itrs_km, q, attitude_frame="GCRS", field="IGRF-14")
-
-    if a_matrix is None:
-        scale = np.diag(1.0 + rng.normal(0.0, 0.03, 3))
-        mis = np.deg2rad(0.5) * rng.normal(size=(3, 3))
-        np.fill_diagonal(mis, 0.0)
-        a_matrix = scale @ (np.eye(3) + mis)
-    if bias_nt is None:
-        bias_nt = rng.normal(0.0, 500.0, 3)
-    A = np.asarray(a_matrix, dtype=np.float64)
-    b0 = np.asarray(bias_nt, dtype=np.float64)
-    b_raw = b_true @ A.T + b0 + rng.normal(0.0, noise_std_nt, size=b_true.shape)
-
-    k_cols: list[FloatArray] = []
-    temperature_c = None
-    mtq = None
-    if temperature:
-        period_s = 5700.0
-        phase = 2 * np.pi * (t - t[0]) / period_s
-        temperature_c = 20.0 + 10.0 * np.sin(phase) + 2.0 * np.sin(phase / 7.3)
-        k_t = np.array([2.0, -1.5, 1.0])
-        b_raw = b_raw + np.outer(temperature_c - 20.0, k_t)
-        k_cols.append(k_t[:, None])
-    if magnetorquer:
-        mtq = np.zeros((n_samples, 3))
-        i = 0
-        while i < n_samples:
-            span = int(rng.integers(max(1, int(120 / dt_s)), max(2, int(300 / dt_s))))
-            mtq[i : i + span] = rng.uniform(-8.0, 8.0, 3)
-            i += span
-        K_mtq = rng.uniform(10.0, 40.0, (3, 3)) * rng.choice([-1.0, 1.0], (3, 3))
-        b_raw = b_raw + mtq @ K_mtq.T
-        k_cols.append(K_mtq)
-    k_hk = np.hstack(k_cols) if k_cols else np.zeros((3, 0))
-    tel = Telemetry(
-        t_utc_s=t,
-        b_raw_nt=b_raw,
-        q_wxyz=q,
-        temperature_c=temperature_c,
-        mtq_am2=mtq,
+    tle_set = parse_tles(tle)[0]
+    random_sensor = SensorModel.random(rng=rng, noise_std_nt=noise_std_nt)
+    sensor = SensorModel(
+        a_matrix=random_sensor.a_matrix if a_matrix is None else np.asarray(a_matrix),
+        bias_nt=random_sensor.bias_nt if bias_nt is None else np.asarray(bias_nt),
+        noise_std_nt=noise_std_nt,
     )
-    return OrbitWorld(tel, tle, b_true, A, b0, k_hk, float(noise_std_nt))
+    effects: list[Effect] = []
+    k_cols: list[FloatArray] = []
+    if temperature:
+        kb = np.asarray(TEMPERATURE_BIAS_NT_PER_C, dtype=np.float64)
+        effects.append(
+            make_effect("temperature", bias_nt_per_c=tuple(kb), scale_per_c=(0.0, 0.0, 0.0))
+        )
+        k_cols.append(kb[:, None])
+    if magnetorquer:
+        coupling = rng.uniform(10.0, 40.0, (3, 3)) * rng.choice([-1.0, 1.0], (3, 3))
+        effects.append(make_effect("magnetorquer", coupling_nt_per_am2=tuple(coupling.reshape(-1))))
+        k_cols.append(coupling)
+    world = simulate_world(
+        tle_set,
+        start_utc_s=tle_set.epoch_utc_s,
+        duration_s=n_samples * dt_s,
+        cadence_s=dt_s,
+        rng=rng,
+        attitude=attitude_profile(attitude),
+        sensor=sensor,
+        effects=effects,
+        housekeeping=Housekeeping(mtq_max_am2=MTQ_MAX_AM2),
+    )
+    tel = dataclasses.replace(
+        world.telemetry,
+        temperature_c=world.telemetry.temperature_c if temperature else None,
+        mtq_am2=world.telemetry.mtq_am2 if magnetorquer else None,
+        hk={},
+    )
+    k_hk = sensor.a_matrix @ np.hstack(k_cols) if k_cols else np.zeros((3, 0))
+    return OrbitWorld(
+        tel,
+        tle,
+        world.b_ref_body_nt,
+        sensor.a_matrix,
+        sensor.bias_nt,
+        k_hk,
+        float(noise_std_nt),
+    )
 
 
 def write_tle(path: str | Path, tle: str = SWARM_A_TLE) -> Path:
