@@ -203,21 +203,64 @@ def _block_diag_rows(x: torch.Tensor, n_out: int) -> torch.Tensor:
 
 
 class NetworkProblem:
-    """Least-squares problem ``r(w) = net(w, u) − t`` (scaled units) for the LM optimiser."""
+    """Least-squares problem ``r(w) = net(w, u) − t`` (scaled units) for the LM optimiser.
+
+    Everything that does not depend on the weights (index maps, the output-selection pattern) is
+    built once here; the hidden activations of the last :meth:`residuals` call are kept, so the
+    normal equations at an accepted step (the same tensor) do not run the network again.
+    """
 
     def __init__(self, net: BPNetwork, u: torch.Tensor, t: torch.Tensor) -> None:
         self.net = net
         self.u = u
         self.t = t
-        # index bookkeeping of normal_equations, computed once
-        self._vidx_cache = self._vidx()
-        self._perm_cache = self._perm()
-        self._rep = torch.repeat_interleave(torch.arange(net.n_hidden), net.n_in + 1)
-        self._ones = torch.ones(u.shape[0], 1, dtype=u.dtype)
-        self._ut = torch.cat([u, self._ones], dim=1)
+        H, Ni, No = net.n_hidden, net.n_in, net.n_out
+        nq = H + 1 + (Ni if net.linear_path else 0)
+        ns = H * Ni + H
+        self._ns, self._nq = ns, nq
+        # hidden unit j of each shared parameter, in flat order [W1 (j, i)…, b1 (j)…]
+        self._rep = torch.tensor([j for j in range(H) for _ in range(Ni)] + list(range(H)))
+        # column of A = [V, Q] (see normal_equations) and output k of every flat parameter
+        col = list(range(ns))
+        out_k = [-1] * ns
+        col += [ns + j for _ in range(No) for j in range(H)]  # W2[k, j]
+        out_k += [k for k in range(No) for _ in range(H)]
+        col += [ns + H] * No  # b2[k]
+        out_k += list(range(No))
+        if net.linear_path:
+            col += [ns + H + 1 + i for _ in range(No) for i in range(Ni)]  # L[k, i]
+            out_k += [k for k in range(No) for _ in range(Ni)]
+        n = len(col)
+        assert n == net.n_params
+        self._col = torch.tensor(col)
+        width = ns + nq
+        self._flat_col = (self._col.unsqueeze(1) * width + self._col.unsqueeze(0)).reshape(-1)
+        c0 = torch.zeros(No, n, dtype=u.dtype)
+        for p_idx, k in enumerate(out_k):
+            if k >= 0:
+                c0[k, p_idx] = 1.0
+        self._c0 = c0
+        w2_start = ns
+        self._w2_slice = slice(w2_start, w2_start + No * H)
+        self._last: tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None = None
+
+    def _hidden_and_residual(self, params: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        last = self._last
+        if last is not None and last[0] is params:
+            return last[1], last[2]
+        net = self.net
+        p = net.unpack(params)
+        z = torch.addmm(p["b1"], self.u, p["W1"].T)
+        h = torch.tanh(z) if net.activation == "tanh" else torch.sigmoid(z)
+        y = torch.addmm(p["b2"], h, p["W2"].T)
+        if net.linear_path:
+            y = torch.addmm(y, self.u, p["L"].T)
+        r = y - self.t
+        self._last = (params, h, r)
+        return h, r
 
     def residuals(self, params: torch.Tensor) -> torch.Tensor:
-        return (self.net.forward(params, self.u) - self.t).reshape(-1)
+        return self._hidden_and_residual(params)[1].reshape(-1)
 
     def residuals_and_jacobian(self, params: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         y, J = self.net.forward_and_jacobian(params, self.u)
@@ -228,74 +271,33 @@ class NetworkProblem:
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """``(r, JᵀJ, Jᵀr)`` of the analytic Jacobian, assembled from its block structure.
 
-        With ``ũ = [u, 1]`` and ``V_n = φ'(z_n) ⊗ ũ_n``, the rows of output ``k`` are
-        ``W2[k, j]·V_n`` on the hidden-layer weights ``(W1, b1)`` and ``Q_n = [h_n, 1, u_n]`` on
-        the output-``k`` weights ``(W2[k], b2[k], L[k])``. Hence ``JᵀJ`` needs only
-        ``VᵀV ⊙ (W2ᵀW2 ⊗ 1)``, ``VᵀQ`` and ``QᵀQ`` — never the dense Jacobian and its zero blocks.
+        Every Jacobian column is one column of ``A = [V, Q]`` times a per-output coefficient:
+        ``∂y_nk/∂w_p = C[k, p]·A[n, a(p)]``, with ``V_n = [φ'(z_n) ⊗ u_n, φ'(z_n)]`` for the
+        hidden-layer weights (``C[k, p] = W2[k, j(p)]``) and ``Q_n = [h_n, 1, u_n]`` for the
+        output-``k`` weights ``W2[k], b2[k], L[k]`` (``C[k, p] = 1`` for that ``k``, else 0).
+        Hence ``JᵀJ = (AᵀA)[a, a] ⊙ CᵀC`` and ``Jᵀr = Σ_k C[k] ⊙ (Aᵀr)[a, k]``: one ``N × 16``
+        product for the 3-3-3 network, never the dense ``3N × 24`` Jacobian and its zero blocks.
         """
         net = self.net
-        p = net.unpack(params)
         u = self.u
         N = u.shape[0]
-        H, Ni, No = net.n_hidden, net.n_in, net.n_out
-        h, dh = net._phi(u @ p["W1"].T + p["b1"])
-        y = h @ p["W2"].T + p["b2"]
+        H, Ni = net.n_hidden, net.n_in
+        ns, nq = self._ns, self._nq
+        h, r = self._hidden_and_residual(params)
+        dh = 1.0 - h * h if net.activation == "tanh" else h * (1.0 - h)
+        A = torch.empty(N, ns + nq, dtype=u.dtype)
+        torch.mul(dh.unsqueeze(2), u.unsqueeze(1), out=A[:, : H * Ni].view(N, H, Ni))
+        A[:, H * Ni : ns] = dh
+        A[:, ns : ns + H] = h
+        A[:, ns + H] = 1.0
         if net.linear_path:
-            y = y + u @ p["L"].T
-        r = y - self.t  # (N, No)
-        ones = self._ones
-        ut = self._ut  # (N, Ni+1)
-        V = (dh.unsqueeze(2) * ut.unsqueeze(1)).reshape(N, H * (Ni + 1))
-        Q = torch.cat([h, ones, u], dim=1) if net.linear_path else torch.cat([h, ones], dim=1)
-        nq = Q.shape[1]
-        W2 = p["W2"]
-        vidx, ns = self._vidx_cache
-        rep = self._rep  # hidden unit of each V column
-        VtV = V.T @ V
-        shared = VtV * (W2.T @ W2)[rep][:, rep]
-        VtQ = V.T @ Q  # (H(Ni+1), nq)
-        QtQ = Q.T @ Q
-        e = r @ W2  # (N, H): Σ_k r_nk W2[k, j]
-        g_shared = ((dh * e).T @ ut).reshape(-1)  # (H(Ni+1),)
-        QtR = Q.T @ r  # (nq, No)
-        n_perm = ns + No * nq
-        JtJ = torch.empty(n_perm, n_perm, dtype=u.dtype)
-        Jtr = torch.empty(n_perm, dtype=u.dtype)
-        JtJ[:ns, :ns] = shared[vidx][:, vidx]
-        Jtr[:ns] = g_shared[vidx]
-        VtQ_s = VtQ[vidx]
-        w_rows = W2[:, rep[vidx]]  # (No, ns): W2[k, j(s)]
-        for k in range(No):
-            a = ns + k * nq
-            cross = VtQ_s * w_rows[k].unsqueeze(1)
-            JtJ[:ns, a : a + nq] = cross
-            JtJ[a : a + nq, :ns] = cross.T
-            for k2 in range(No):
-                b = ns + k2 * nq
-                JtJ[a : a + nq, b : b + nq] = QtQ if k2 == k else 0.0
-            Jtr[a : a + nq] = QtR[:, k]
-        perm = self._perm_cache
-        return r.reshape(-1), JtJ[perm][:, perm], Jtr[perm]
-
-    def _vidx(self) -> tuple[torch.Tensor, int]:
-        """Column of ``V`` for each shared parameter ``[W1 (j, i)…, b1 (j)…]``."""
-        H, Ni = self.net.n_hidden, self.net.n_in
-        idx = [j * (Ni + 1) + i for j in range(H) for i in range(Ni)]
-        idx += [j * (Ni + 1) + Ni for j in range(H)]
-        return torch.tensor(idx), H * Ni + H
-
-    def _perm(self) -> torch.Tensor:
-        """Index into the block order [shared, out_0, out_1, …] for each flat parameter."""
-        net = self.net
-        H, Ni, No = net.n_hidden, net.n_in, net.n_out
-        ns = H * Ni + H
-        nq = H + 1 + (Ni if net.linear_path else 0)
-        idx = list(range(ns))  # W1, b1 are first in both orders
-        idx += [ns + k * nq + j for k in range(No) for j in range(H)]  # W2[k, j]
-        idx += [ns + k * nq + H for k in range(No)]  # b2[k]
-        if net.linear_path:
-            idx += [ns + k * nq + H + 1 + i for k in range(No) for i in range(Ni)]  # L[k, i]
-        return torch.tensor(idx)
+            A[:, ns + H + 1 :] = u
+        C = self._c0.clone()
+        C[:, :ns] = params[self._w2_slice].view(net.n_out, H)[:, self._rep]
+        n = C.shape[1]
+        JtJ = (A.T @ A).reshape(-1)[self._flat_col].view(n, n) * (C.T @ C)
+        Jtr = ((A.T @ r)[self._col] * C.T).sum(1)
+        return r.reshape(-1), JtJ, Jtr
 
 
 class LMBPCalibration(Calibration):
