@@ -88,11 +88,8 @@ def apply_linear(document: dict[str, Any], b_raw_nt: np.ndarray) -> np.ndarray:
 def diagnose(
     telemetry: Telemetry, *, orbit: Any, attitude_frame: str, field: str = "IGRF-14"
 ) -> dict[str, Any]:
-    """The section-5 diagnosis report on ``telemetry`` (``ImportError`` if the build lacks it)."""
-    try:
-        from orbitcal.diagnose import diagnose as run  # type: ignore[attr-defined]
-    except ImportError:
-        from orbitcal.diagnose.api import diagnose as run  # type: ignore[import-not-found,no-redef]
+    """The section-5 diagnosis report on ``telemetry`` (``orbitcal.diagnose.diagnose``)."""
+    from orbitcal.diagnose import diagnose as run
 
     report = run(
         telemetry,

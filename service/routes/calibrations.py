@@ -218,7 +218,7 @@ def _diagnosis_future(app: Any, spacecraft_id: str) -> Future[dict[str, Any]]:
 
 @router.get(
     "/{spacecraft_id}/diagnosis",
-    responses={**_ERRORS, 422: {"model": ErrorPublic}, 501: {"model": ErrorPublic}},
+    responses={**_ERRORS, 422: {"model": ErrorPublic}},
 )
 async def diagnosis(
     spacecraft_id: str,
@@ -256,7 +256,5 @@ async def diagnosis(
     fut = _diagnosis_future(app, spacecraft_id)
     try:
         return await asyncio.wrap_future(fut)
-    except ImportError:
-        raise HTTPException(status_code=501, detail="this build has no orbitcal.diagnose") from None
     except ValueError as exc:
         raise HTTPException(status_code=422, detail=str(exc)) from None
