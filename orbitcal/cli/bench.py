@@ -15,10 +15,6 @@ from pathlib import Path
 
 __all__ = ["register", "run_diagnose"]
 
-DEFAULT_TLE = (
-    Path(__file__).resolve().parents[2] / "tests" / "authorities" / "swarm_iss_real_tles.tle"
-)
-
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add the ``bench`` sub-command (with its ``diagnose`` benchmark)."""
@@ -55,9 +51,15 @@ def run_diagnose(args: argparse.Namespace) -> int:
 
     if args.cases < 1:
         raise CliError("--cases must be at least 1")
-    tle_path = Path(args.tle) if args.tle else DEFAULT_TLE
-    if not tle_path.is_file():
-        raise CliError(f"TLE file not found: {tle_path} (give --tle)")
+    from orbitcal.data import real_tles_text
+
+    if args.tle:
+        try:
+            tle_text = Path(args.tle).read_text()
+        except OSError as exc:
+            raise CliError(f"cannot read TLE file {args.tle}: {exc.strerror}") from None
+    else:
+        tle_text = real_tles_text()
     console = Console(stderr=True)
     correct = 0
     t0 = time.perf_counter()
@@ -79,7 +81,7 @@ def run_diagnose(args: argparse.Namespace) -> int:
         result = run_benchmark(
             args.cases,
             seed=args.seed,
-            tle_text=tle_path.read_text(),
+            tle_text=tle_text,
             n_orbits=args.orbits,
             progress=on_case,
         )

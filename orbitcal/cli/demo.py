@@ -16,7 +16,6 @@ import sys
 import tempfile
 import threading
 import time
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -93,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
 
     from orbitcal.calibrate.holdout import rms_nt
     from orbitcal.cli import CliError
+    from orbitcal.data import real_tles_text
     from orbitcal.sensor import SensorModel
     from orbitcal.simulate import Tumbling, make_effect, select_tle, simulate_world
     from orbitcal.timescales import utc_s_to_iso
@@ -121,8 +121,8 @@ def run(args: argparse.Namespace) -> int:
     )
 
     # --- the simulated spacecraft (orbitcal.simulate on a real TLE) ---------------------------
-    tle_text = resources.files("service.data").joinpath("swarm_a.tle").read_text("utf-8")
-    tle = select_tle(tle_text)
+    # Swarm A's real CelesTrak set of 2022-08-01 (orbitcal/data, provenance in its README).
+    tle = select_tle(real_tles_text(), norad_id=39452, at_utc_s=1659398400.0)
     start = float(np.floor(tle.epoch_utc_s / 86400.0) * 86400.0)
     rng = np.random.default_rng(args.seed)
     sensor = SensorModel.random(rng=rng)
@@ -174,7 +174,7 @@ def run(args: argparse.Namespace) -> int:
     sc = "swarm-a"
     try:
         with httpx.Client(base_url=url, headers={"X-API-Key": admin_key}, timeout=60) as c:
-            r = c.post("/v1/spacecraft", json={"id": sc, "tle": tle_text})
+            r = c.post("/v1/spacecraft", json={"id": sc, "tle": tle.text})
             if r.status_code != 201:
                 raise CliError(f"registering the spacecraft failed: {r.text}")
             accepted = 0

@@ -1,7 +1,7 @@
 """The blind benchmark: worlds with one injected effect, diagnosed without being told which.
 
 Each case is a world of :func:`orbitcal.simulate.simulate_world` on a real TLE (Swarm A/B/C or the
-ISS, ``tests/authorities/swarm_iss_real_tles.tle`` shipped with the package data of the tests, or
+ISS, ``orbitcal/data/swarm_iss_real_tles.tle`` shipped with the package, or
 any TLE file given), with nadir or tumbling attitude, one effect of the CONTRACT section-5
 catalogue at one of several magnitudes (or none: the null world), a random sensor and noise. The
 diagnosis sees only the telemetry and the TLE (:func:`orbitcal.diagnose.api.diagnosis_data`), never
