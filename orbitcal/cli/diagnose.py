@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
+
+from orbitcal.cli._inputs import add_field_argument, add_table_arguments, load_orbit, load_table
 
 __all__ = ["register", "run"]
 
@@ -26,27 +27,10 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
             "effects with their held-out shrink, and where the residual lies (CONTRACT section 5)."
         ),
     )
-    p.add_argument(
-        "telemetry", metavar="TELEMETRY", help="telemetry table (.csv/.parquet/.ndjson/.json)"
-    )
-    p.add_argument("--tle", metavar="TLE", help="file with one TLE (needed without r_x,r_y,r_z)")
+    add_table_arguments(p)
+    add_field_argument(p)
     p.add_argument("--out", required=True, metavar="REPORT.json", help="output report (JSON)")
     p.add_argument("--html", metavar="REPORT.html", help="also write an HTML report with plots")
-    p.add_argument(
-        "--attitude-frame",
-        default="GCRS",
-        choices=("GCRS", "ITRS"),
-        help="frame the quaternions refer to (default GCRS)",
-    )
-    p.add_argument(
-        "--time-scale",
-        default="UTC",
-        choices=("UTC", "TAI", "GPS"),
-        help="time scale of the table's times (default UTC)",
-    )
-    p.add_argument(
-        "--field", default="IGRF-14", metavar="NAME", help="reference field (default IGRF-14)"
-    )
     p.add_argument("--seed", type=int, default=0, help="seed of the learned model (default 0)")
     p.set_defaults(func=run)
 
@@ -56,38 +40,17 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
     from threadpoolctl import threadpool_limits
 
-    from orbitcal.cli import CliError
     from orbitcal.diagnose.api import diagnose_parts, diagnosis_data
     from orbitcal.diagnose.report import report_html
     from orbitcal.field import get_field
-    from orbitcal.telemetry import read_telemetry
 
     get_field(args.field)  # unknown names fail before any reading
-    result = read_telemetry(args.telemetry, time_scale=args.time_scale)
-    tel = result.telemetry
-    if result.rejected:
-        first = result.rejected[0]
-        print(
-            f"orbitcal diagnose: {len(result.rejected)} rows rejected (first: row {first.row}: "
-            f"{first.reason}); the {len(tel)} valid rows are used",
-            file=sys.stderr,
-        )
-    if len(tel) == 0:
-        raise CliError(f"{args.telemetry}: no valid rows")
-    if tel.q_wxyz is None:
-        raise CliError(
-            f"{args.telemetry}: no quaternion columns q_w, q_x, q_y, q_z: the diagnosis compares "
-            "vectors in the body frame and needs the attitude"
-        )
-    orbit = None
-    if tel.r_itrs_km is None:
-        if not args.tle:
-            raise CliError(
-                f"{args.telemetry} has no positions (r_x, r_y, r_z): give the spacecraft's --tle"
-            )
-        from orbitcal.orbit import Orbit
-
-        orbit = Orbit.from_tle(Path(args.tle).read_text())
+    tel = load_table(
+        args,
+        "diagnose",
+        need_attitude="the diagnosis compares vectors in the body frame and needs the attitude",
+    )
+    orbit = None if tel.r_itrs_km is not None else load_orbit(args, tel)
     with threadpool_limits(1):
         data = diagnosis_data(
             tel, orbit=orbit, field=args.field, attitude_frame=args.attitude_frame
