@@ -487,17 +487,18 @@ def fit_lmbp(
         coef = torch.linalg.lstsq(U, t).solution  # (n_in + 1, 3)
         linear_init = (coef[:-1].T.contiguous(), coef[-1].clone())
 
-    best: LMResult | None = None
     starts: list[torch.Tensor] = []
     if warm_start is not None:
         starts.append(torch.from_numpy(warm_start.params.copy()))
     else:
         starts = [net.init_params(generator, linear_init=linear_init) for _ in range(restarts)]
-    for w0 in starts:
-        result = levenberg_marquardt(problem, w0, options=options, callback=callback)
-        if best is None or result.loss < best.loss:
-            best = result
-    assert best is not None
+    hidden_layer = "kept"
+    if linear_init is not None and warm_start is None:
+        best, hidden_layer = _fit_with_validation_guard(
+            net, u, t, starts, linear_init, options=options, callback=callback
+        )
+    else:
+        best = _best_of(problem, starts, options=options, callback=callback)
     cal = LMBPCalibration(
         method,
         net,
@@ -511,7 +512,102 @@ def fit_lmbp(
             "stop_reason": best.stop_reason,
             "restarts": len(starts),
             "warm_start": warm_start is not None,
+            "hidden_layer": hidden_layer,
         },
     )
     cal.set_linear_approximation(data.b_raw_nt, data.x_hk if use_hk else None)
     return cal
+
+
+#: Share of the training samples (the latest, in time order) that judges the hidden layer.
+VALIDATION_FRACTION = 0.2
+
+
+def _best_of(
+    problem: NetworkProblem,
+    starts: list[torch.Tensor],
+    *,
+    options: LMOptions | None,
+    callback: Callable[[int, float], None] | None,
+) -> LMResult:
+    """LM from every start; the lowest training loss wins."""
+    best: LMResult | None = None
+    for w0 in starts:
+        result = levenberg_marquardt(problem, w0, options=options, callback=callback)
+        if best is None or result.loss < best.loss:
+            best = result
+    assert best is not None
+    return best
+
+
+def _fit_with_validation_guard(
+    net: BPNetwork,
+    u: torch.Tensor,
+    t: torch.Tensor,
+    starts: list[torch.Tensor],
+    linear_init: tuple[torch.Tensor, torch.Tensor],
+    *,
+    options: LMOptions | None,
+    callback: Callable[[int, float], None] | None,
+) -> tuple[LMResult, str]:
+    """Train with the hidden layer only where it earns its place on later, unseen samples.
+
+    A network with a linear path can fit the training span better than the affine model and
+    still extrapolate worse: tanh units saturating on housekeeping inputs (temperature,
+    magnetorquer commands) outside their training range added tens of nT on a later block of a
+    nadir orbit. So the network is first trained on the earlier ``1 − VALIDATION_FRACTION`` of the
+    samples (rows are in time order) and compared with the linear path alone (the least-squares
+    start with the hidden outputs off) on the latest ``VALIDATION_FRACTION``. If it is better
+    there, it is trained on all samples from where it stood; otherwise the hidden layer is
+    switched off (``W2 = 0``) and the calibration is the linear least-squares solution on all
+    samples. Returns the result and a sentence saying which happened.
+    """
+    n = u.shape[0]
+    n_val = round(VALIDATION_FRACTION * n)
+    n_fit = n - n_val
+    if n_val < 10 or n_fit * 3 < 2 * net.n_params:
+        return _best_of(NetworkProblem(net, u, t), starts, options=options, callback=callback), (
+            "kept (too few samples to validate)"
+        )
+    early = _best_of(
+        NetworkProblem(net, u[:n_fit], t[:n_fit]), starts, options=options, callback=callback
+    )
+    # The linear path refitted on the same earlier samples, hidden layer off.
+    U_fit = torch.cat([u[:n_fit], torch.ones(n_fit, 1, dtype=torch.float64)], dim=1)
+    coef = torch.linalg.lstsq(U_fit, t[:n_fit]).solution
+    parts = net.unpack(early.params.clone())
+    lin_parts = {k: v.clone() for k, v in parts.items()}
+    lin_parts["W2"] = torch.zeros_like(parts["W2"])
+    lin_parts["L"], lin_parts["b2"] = coef[:-1].T.contiguous(), coef[-1].clone()
+
+    def val_rms(w: torch.Tensor) -> float:
+        return float(torch.sqrt(torch.mean((net.forward(w, u[n_fit:]) - t[n_fit:]) ** 2)))
+
+    rms_net, rms_lin = val_rms(early.params), val_rms(net.pack(lin_parts))
+    if rms_net <= rms_lin:
+        full = levenberg_marquardt(
+            NetworkProblem(net, u, t), early.params.clone(), options=options, callback=callback
+        )
+        return full, (
+            f"kept: on the latest {VALIDATION_FRACTION:.0%} of the training samples it leaves "
+            f"{rms_net / rms_lin:.3f}× the linear path's RMS"
+        )
+    # Hidden layer off: the least-squares linear solution on every sample.
+    off = net.unpack(early.params.clone())
+    off["W2"] = torch.zeros_like(off["W2"])
+    off["L"], off["b2"] = linear_init[0].clone(), linear_init[1].clone()
+    w_off = net.pack(off)
+    r_off = NetworkProblem(net, u, t).residuals(w_off)
+    result = LMResult(
+        params=w_off,
+        epochs=early.epochs,
+        loss=float(0.5 * torch.sum(r_off**2)),
+        mse=float(torch.mean(r_off**2)),
+        stop_reason=early.stop_reason,
+        n_residuals=r_off.numel(),
+    )
+    return result, (
+        f"off: on the latest {VALIDATION_FRACTION:.0%} of the training samples it left "
+        f"{rms_net / rms_lin:.3f}× the linear path's RMS, so the calibration is the linear "
+        "least-squares solution"
+    )
