@@ -123,7 +123,10 @@ class Wang2020Result:
 
     def to_json(self) -> dict[str, Any]:
         return {
-            "table1": [{"hidden_nodes": h, "regression_coefficient": r} for h, r in self.table1],
+            # CONTRACT section 6 lists Table 1 as "2..7 nodes": ascending.
+            "table1": [
+                {"hidden_nodes": h, "regression_coefficient": r} for h, r in sorted(self.table1)
+            ],
             "lm_epochs_to_mse_1e-3": self.lm_epochs_to_mse_1e3,
             "ground_max_error_nt": self.ground_max_error_nt,
             "orbit_change": {
