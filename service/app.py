@@ -29,7 +29,7 @@ from service.routes import calibrations, dashboard, jobs, keys, ops, spacecraft,
 from service.scheduler import FleetScheduler
 from service.schemas import ErrorPublic
 from service.settings import Settings
-from service.storage import hash_key, make_engine, upgrade
+from service.storage import CommitOutcomeUnknown, hash_key, make_engine, upgrade
 
 __all__ = ["create_app"]
 
@@ -201,7 +201,8 @@ def create_app(
             },
             503: {
                 "model": ErrorPublic,
-                "description": "database unavailable; nothing was stored",
+                "description": "database unavailable: nothing was stored, or (connection lost "
+                "during commit) the outcome is unknown and re-sending is safe",
                 "headers": {"Retry-After": {"schema": {"type": "integer"}}},
             },
         },
@@ -248,6 +249,16 @@ def create_app(
             422,
             "invalid request: " + "; ".join(f"{e['field']}: {e['reason']}" for e in errors),
             errors,
+        )
+
+    @app.exception_handler(CommitOutcomeUnknown)
+    async def _commit_unknown(_request: Request, exc: CommitOutcomeUnknown) -> JSONResponse:
+        log.warning("database connection lost during commit")
+        return _error(
+            503,
+            "database connection lost while committing: the request may or may not have been "
+            "stored; re-send it (telemetry ingest is idempotent: duplicates change nothing)",
+            headers={"Retry-After": "5"},
         )
 
     @app.exception_handler(sa.exc.OperationalError)

@@ -30,6 +30,7 @@ __all__ = [
     "ApiKey",
     "Base",
     "Calibration",
+    "CommitOutcomeUnknown",
     "Job",
     "RetrainLock",
     "Sample",
@@ -376,11 +377,45 @@ def release_lock(conn: Connection, spacecraft_pk: int, job_id: str) -> None:
     )
 
 
+class CommitOutcomeUnknown(sa.exc.SQLAlchemyError):
+    """The database connection was lost while COMMIT was in flight.
+
+    The server may have made the transaction durable before it went away, so the caller cannot
+    tell whether it was stored: re-sending is the safe answer (ingest is idempotent by
+    (spacecraft, time)). Raised instead of the driver's error only for failures of COMMIT itself;
+    a failure before it means nothing was stored.
+    """
+
+
 @contextlib.contextmanager
 def write_tx(engine: Engine) -> Iterator[Connection]:
-    """A write transaction, committed on exit (SQLite: ``BEGIN IMMEDIATE``)."""
-    with engine.connect().execution_options(write=True) as conn, conn.begin():
-        yield conn
+    """A write transaction, committed on exit (SQLite: ``BEGIN IMMEDIATE``).
+
+    Raises :class:`CommitOutcomeUnknown` when the connection is lost during COMMIT.
+    """
+    with engine.connect().execution_options(write=True) as conn:
+        tx = conn.begin()
+        try:
+            yield conn
+        except BaseException as exc:
+            with contextlib.suppress(Exception):
+                tx.rollback()  # may fail too when the connection is gone; the first error wins
+            dbapi_error = engine.dialect.loaded_dbapi.Error
+            if isinstance(exc, dbapi_error):
+                # A raw driver error (bulk inserts use the DBAPI cursor): the same typed
+                # SQLAlchemy error as any other statement, so a lost server answers 503.
+                raise sa.exc.DBAPIError.instance(
+                    None, None, exc, dbapi_error, connection_invalidated=conn.invalidated
+                ) from exc
+            raise
+        try:
+            tx.commit()
+        except sa.exc.DBAPIError as exc:
+            if exc.connection_invalidated or isinstance(
+                exc, sa.exc.OperationalError | sa.exc.InterfaceError
+            ):
+                raise CommitOutcomeUnknown(str(exc.orig)) from exc
+            raise
 
 
 @contextlib.contextmanager

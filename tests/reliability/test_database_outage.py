@@ -93,7 +93,8 @@ def cluster() -> Iterator[Cluster]:
 @dataclass
 class Log:
     acked: set[int] = field(default_factory=set)
-    unavailable: set[int] = field(default_factory=set)  # 503 answers
+    unavailable: set[int] = field(default_factory=set)  # 503 answers: nothing stored
+    unknown: set[int] = field(default_factory=set)  # 503, connection lost during COMMIT
     lost: set[int] = field(default_factory=set)  # no answer
     retry_after: set[str] = field(default_factory=set)
     other: list[tuple[int, int, str]] = field(default_factory=list)
@@ -113,7 +114,8 @@ def _client(c: int, url: str, stop: threading.Event, log: Log) -> None:
                 if r.status_code == 200:
                     log.acked.add(k)
                 elif r.status_code == 503:
-                    log.unavailable.add(k)
+                    in_commit = "while committing" in r.json()["detail"]
+                    (log.unknown if in_commit else log.unavailable).add(k)
                     log.retry_after.add(r.headers.get("retry-after", ""))
                     log.first_503_detail = log.first_503_detail or r.json()["detail"]
                     time.sleep(0.05)
@@ -204,12 +206,15 @@ def test_postgresql_crash_during_ingest_gives_503_and_no_partial_batch(
             assert stored.get((c, k)) == BATCH, f"acknowledged batch {c}/{k} not fully stored"
         for k in lg.unavailable:
             assert (c, k) not in stored, f"batch {c}/{k} answered 503 but stored"
-        for k in lg.lost:
+        for k in lg.lost | lg.unknown:
+            # no answer, or 503 because the connection died during COMMIT: whole or absent
             assert stored.get((c, k), 0) in (0, BATCH), f"batch {c}/{k} half-written"
     n503 = sum(len(lg.unavailable) for lg in logs)
+    n_unknown = sum(len(lg.unknown) for lg in logs)
     print(
         f"\nPostgreSQL crashed {CRASHES} times, down {min(down_s):.1f}-{max(down_s):.1f} s: "
-        f"{n503} uploads answered 503 (Retry-After 5), "
+        f"{n503} uploads answered 503 (Retry-After 5), {n_unknown} answered 503 "
+        "with the outcome unknown (connection lost during COMMIT), "
         f"{sum(len(lg.lost) for lg in logs)} unanswered; {acked_before} acked before the crash, "
         f"{acked()} in all; ingest resumed at most {max(resume_s):.2f} s after a restart"
     )
