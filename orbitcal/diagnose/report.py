@@ -22,7 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from orbitcal.diagnose.attribution import Attribution
-from orbitcal.diagnose.effects import DiagnosisData, get_effect
+from orbitcal.diagnose.effects import EFFECT_NAMES, DiagnosisData, get_effect
 
 __all__ = ["BASELINE_METHOD", "build_report", "report_html"]
 
@@ -115,22 +115,7 @@ def build_report(
             "n_train": int((~held).sum()),
             "n_holdout": int(held.sum()),
             "holdout": "later time blocks (last 30 % of the span) that no fit saw",
-            "candidates_without_witness": sorted(
-                {
-                    "temperature",
-                    "magnetorquer",
-                    "time_offset",
-                    "external_field",
-                    "crustal_field",
-                    "sun_driven",
-                    "nonlinearity",
-                    "orbit_error",
-                    "parameter_drift",
-                    "field_aligned_currents",
-                    "attitude_error",
-                }
-                - {e.name for e in att.effects}
-            ),
+            "candidates_without_witness": sorted(set(EFFECT_NAMES) - {e.name for e in att.effects}),
             "crust_model": data.crust_model,
         },
     }
