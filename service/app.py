@@ -261,33 +261,24 @@ def create_app(
             headers={"Retry-After": "5"},
         )
 
-    @app.exception_handler(sa.exc.OperationalError)
-    async def _db_unavailable(_request: Request, exc: sa.exc.OperationalError) -> JSONResponse:
-        log.warning("database unavailable", extra={"error": type(exc.orig).__name__})
+    def _unavailable(exc: sa.exc.DBAPIError, what: str) -> JSONResponse:
+        log.warning(what, extra={"error": type(exc.orig).__name__})
         return _error(
             503,
             "database unavailable, nothing was stored; retry later",
             headers={"Retry-After": "5"},
         )
 
-    @app.exception_handler(sa.exc.InterfaceError)
-    async def _db_interface(_request: Request, exc: sa.exc.InterfaceError) -> JSONResponse:
-        log.warning("database unavailable", extra={"error": type(exc.orig).__name__})
-        return _error(
-            503,
-            "database unavailable, nothing was stored; retry later",
-            headers={"Retry-After": "5"},
-        )
+    async def _db_unavailable(_request: Request, exc: sa.exc.DBAPIError) -> JSONResponse:
+        return _unavailable(exc, "database unavailable")
+
+    app.add_exception_handler(sa.exc.OperationalError, _db_unavailable)  # type: ignore[arg-type]
+    app.add_exception_handler(sa.exc.InterfaceError, _db_unavailable)  # type: ignore[arg-type]
 
     @app.exception_handler(sa.exc.DBAPIError)
     async def _db_error(_request: Request, exc: sa.exc.DBAPIError) -> JSONResponse:
         if exc.connection_invalidated:
-            log.warning("database connection lost", extra={"error": type(exc.orig).__name__})
-            return _error(
-                503,
-                "database unavailable, nothing was stored; retry later",
-                headers={"Retry-After": "5"},
-            )
+            return _unavailable(exc, "database connection lost")
         log.error("database error", exc_info=exc)
         return _error(500, "internal error (logged)")
 

@@ -44,6 +44,24 @@ def _iso(mjd2000: float) -> str:
     return t.strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
+def require_in_range(
+    mjd: FloatArray, valid_mjd2000: tuple[float, float], *, name: str, advice: str
+) -> None:
+    """Raise :class:`FieldRangeError` naming the first sample outside ``valid_mjd2000``.
+
+    ``mjd`` are the samples' times [MJD2000]; ``advice`` says what the caller can do.
+    """
+    start, end = valid_mjd2000
+    bad = ~((mjd >= start) & (mjd <= end))
+    if np.any(bad):
+        i = int(np.argmax(bad))
+        when = "not a finite time" if not np.isfinite(mjd[i]) else _iso(mjd[i])
+        raise FieldRangeError(
+            f"{name} is valid from {_iso(start)} to {_iso(end)}; sample {i} is at {when} "
+            f"({int(bad.sum())} samples outside): {advice}"
+        )
+
+
 def _broadcast_samples(
     t_utc_s: FloatArray, radius_km: FloatArray, colat_deg: FloatArray, lon_deg: FloatArray
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
@@ -171,15 +189,9 @@ class SphericalHarmonicModel:
         mjd = utc_s_to_mjd2000(t_utc_s).reshape(-1)
         if self.static:
             return mjd
-        start, end = self.valid_mjd2000
-        bad = ~((mjd >= start) & (mjd <= end))
-        if np.any(bad):
-            i = int(np.argmax(bad))
-            when = "not a finite time" if not np.isfinite(mjd[i]) else _iso(mjd[i])
-            raise FieldRangeError(
-                f"{self.name} is valid from {_iso(start)} to {_iso(end)}; sample {i} is at "
-                f"{when} ({int(bad.sum())} samples outside): choose a model that covers it"
-            )
+        require_in_range(
+            mjd, self.valid_mjd2000, name=self.name, advice="choose a model that covers it"
+        )
         return mjd
 
     def _piece_and_offset(self, mjd: FloatArray) -> tuple[NDArray[np.intp], FloatArray]:

@@ -31,7 +31,7 @@ import h5py
 import numpy as np
 from numpy.typing import NDArray
 
-from orbitcal.field._base import FieldRangeError, _broadcast_samples, _iso, utc_s_to_mjd2000
+from orbitcal.field._base import _broadcast_samples, require_in_range, utc_s_to_mjd2000
 from orbitcal.field.synthesis import synth_internal_nec_nt
 
 __all__ = [
@@ -137,15 +137,12 @@ class RingCurrentField:
     def rc_nt(self, t_utc_s: FloatArray) -> tuple[FloatArray, FloatArray]:
         """External and internal parts of the RC index at each time [nT]."""
         mjd = utc_s_to_mjd2000(t_utc_s).reshape(-1)
-        start, end = self.valid_mjd2000
-        bad = ~((mjd >= start) & (mjd <= end))
-        if np.any(bad):
-            i = int(np.argmax(bad))
-            when = "not a finite time" if not np.isfinite(mjd[i]) else _iso(mjd[i])
-            raise FieldRangeError(
-                f"RC (RC index) is valid from {_iso(start)} to {_iso(end)}; sample {i} is at "
-                f"{when}: leave RC out of the field name for these dates"
-            )
+        require_in_range(
+            mjd,
+            self.valid_mjd2000,
+            name="RC (RC index)",
+            advice="leave RC out of the field name for these dates",
+        )
         return (
             np.interp(mjd, self.rc_time_mjd2000, self.rc_e),
             np.interp(mjd, self.rc_time_mjd2000, self.rc_i),
