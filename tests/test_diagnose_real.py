@@ -20,6 +20,7 @@ from scipy.spatial.transform import Rotation
 from orbitcal import frames
 from orbitcal.diagnose.api import _field_body, diagnose_parts, diagnosis_data
 from orbitcal.diagnose.effects import DiagnosisData
+from orbitcal.diagnose.prior import CalibrationPrior
 
 AUTH = Path(__file__).parent / "authorities"
 SWARM_EPOCH_UTC_S = 1451606400.0  # 2016-01-01T00:00:00Z, the file's Timestamp origin
@@ -33,7 +34,55 @@ def _single_thread_blas():  # type: ignore[no-untyped-def]
         yield
 
 
-def _swarm_storm_data() -> tuple[DiagnosisData, np.ndarray, np.ndarray]:
+#: The synthetic sensor of the storm pass: 1 % matrix errors, 100 nT offsets, 1 nT noise.
+_STORM_RNG_SEED = 5
+
+
+def _storm_sensor() -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(_STORM_RNG_SEED)
+    return np.eye(3) + rng.normal(scale=0.01, size=(3, 3)), rng.normal(scale=100.0, size=3)
+
+
+def _quiet_day_calibration() -> dict[str, object]:
+    """The calibration in service before the storm: the same sensor, one quiet day, linear fit.
+
+    The quiet day is a simulated Swarm A day (real TLE) whose truth holds what a quiet calibration
+    cannot model either -- the MF7 crust and a -20 nT uniform magnetospheric field -- so the prior
+    is imperfect as real ones are (its offsets come out ~10 nT off: the spin axis is fixed, and a
+    uniform field's part along it looks like an offset).
+    """
+    from orbitcal.orbit import Orbit
+    from orbitcal.pipeline import calibrate_telemetry
+    from orbitcal.sensor import SensorModel
+    from orbitcal.simulate import Tumbling, make_effect, simulate_world
+
+    a, o = _storm_sensor()
+    tle = _swarm_tles()[0]
+    world = simulate_world(
+        tle,  # type: ignore[arg-type]
+        start_utc_s=tle.epoch_utc_s + 3600.0,  # type: ignore[attr-defined]
+        duration_s=86400.0,
+        cadence_s=10.0,
+        rng=np.random.default_rng(11),
+        attitude=Tumbling(),
+        sensor=SensorModel(a_matrix=a, bias_nt=o, noise_std_nt=1.0),
+        effects=[
+            make_effect("crustal_field", model="MF7"),
+            make_effect("external_field", amplitude_nt=-20.0),
+        ],
+    )
+    _, doc = calibrate_telemetry(
+        world.telemetry,
+        orbit=Orbit.from_tle(tle.text),  # type: ignore[attr-defined]
+        method="linear",
+        rng=np.random.default_rng(0),
+    )
+    return doc
+
+
+def _swarm_storm_data(
+    prior: CalibrationPrior | None = None,
+) -> tuple[DiagnosisData, np.ndarray, np.ndarray]:
     from orbitcal.field.external import ring_current_field
     from orbitcal.sun import illumination_conical, sun_position_gcrs_km
     from orbitcal.truth import reference_field_itrs_nt
@@ -47,8 +96,9 @@ def _swarm_storm_data() -> tuple[DiagnosisData, np.ndarray, np.ndarray]:
         b_nec = g["B_NEC"][:]
     r = frames.spherical_to_itrs(radius_km, 90.0 - lat, lon)
     b_meas_itrs = frames.nec_to_itrs(b_nec, r)
-    rng = np.random.default_rng(5)
-    # Synthetic attitude (steady spin, ITRS frame) and sensor (1 % matrix, 100 nT biases, 1 nT).
+    a, o = _storm_sensor()
+    rng = np.random.default_rng(_STORM_RNG_SEED + 1)
+    # Synthetic attitude (steady spin, ITRS frame) and the sensor.
     rot = (
         (
             Rotation.from_rotvec(np.outer(t - t[0], np.radians([0.6, -1.1, 1.4])))
@@ -57,8 +107,6 @@ def _swarm_storm_data() -> tuple[DiagnosisData, np.ndarray, np.ndarray]:
         .inv()
         .as_matrix()
     )
-    a = np.eye(3) + rng.normal(scale=0.01, size=(3, 3))
-    o = rng.normal(scale=100.0, size=3)
     b_true_body = np.einsum("nij,nj->ni", rot, b_meas_itrs)
     b_raw = b_true_body @ a.T + o + rng.normal(scale=1.0, size=b_true_body.shape)
     b_ref_body = np.einsum("nij,nj->ni", rot, reference_field_itrs_nt(t, r, field="IGRF-14"))
@@ -81,22 +129,36 @@ def _swarm_storm_data() -> tuple[DiagnosisData, np.ndarray, np.ndarray]:
         b_ext_body_nt=_field_body("RC", t, r, rot),
         b_crust_body_nt=_field_body("LCS-1", t, r, rot),
         crust_model="LCS-1",
+        calibration_prior=prior,
+        positions_measured=True,  # Swarm's GPS positions
     )
     return data, lat, rot
 
 
+def _low_latitude_nec(
+    data: DiagnosisData, residual: np.ndarray, rot: np.ndarray, mask: np.ndarray
+) -> np.ndarray:
+    nec = frames.itrs_to_nec(np.einsum("nji,nj->ni", rot, residual), data.r_itrs_km)
+    return np.asarray(nec[mask])
+
+
 def test_swarm_storm_pass_external_field_and_auroral_currents() -> None:
-    data, lat, rot = _swarm_storm_data()
+    from orbitcal.diagnose.prior import prior_from_document
+
+    doc = _quiet_day_calibration()
+    data, lat, rot = _swarm_storm_data(prior_from_document(doc))
     amlat = np.abs(data.mlat_deg)
     # 30 min only: the last 20 % is held out; fits use quiet |magnetic latitude| < 50 deg, as
     # Swarm processing does (the auroral crossing would otherwise drag the 12 parameters).
     report, att = diagnose_parts(data, learned=False, holdout_blocks=2, fit_mask=amlat < 50.0)
+    assert report["baseline"]["calibration_prior"]["source"].startswith("calibration document")
     assert report["verdict"] == "external_field"
     ext = report["effects"][0]
-    assert ext["name"] == "external_field" and ext["significant"] and ext["shrink"] > 2.0
+    assert ext["name"] == "external_field" and ext["significant"] and ext["shrink"] > 4.0
 
-    # Where: the excess lies at high magnetic latitude, perpendicular to B.
-    where = report["where"]
+    # Where: with the ring current modelled, what is left lies at high magnetic latitude,
+    # perpendicular to B.
+    where = report["final"]["where"]
     assert where["concentration"].startswith("|mlat|")
     lo_band = float(where["concentration"].split()[1].split("-")[0])
     assert lo_band >= 50.0
@@ -108,29 +170,37 @@ def test_swarm_storm_pass_external_field_and_auroral_currents() -> None:
     fac = {e["name"]: e for e in report["effects"]}["field_aligned_currents"]
     assert fac["significant"], fac
 
-    # The low-latitude residual against IGRF-14: mean ~ -166 nT in N in the measured field itself
-    # (data README). Through the synthetic sensor, on the held-out low-latitude samples the
-    # calibration plus the external field leaves ~30 nT in N (measured; the issue's target of
-    # 15 nT is not reached: the 12 parameters and the field are fitted on 13 quiet minutes).
-    from orbitcal.diagnose.attribution import _resolve, fit_joint
-    from orbitcal.diagnose.effects import get_effect
-
-    block = _resolve(data, att.train, [], get_effect("external_field").design(data, att.train))
-    fit = fit_joint(data, att.train, [block])
-    residual = data.b_raw_nt - fit.predict_nt(data)
+    # The low-latitude residual against IGRF-14 on the held-out samples, NEC: the calibration
+    # alone leaves most of the storm's ring current (measured: mean [-99, 45, -41] nT; the data
+    # README gives -166 nT in N for the measured field itself, and the prior cannot stop the
+    # calibration-only fit absorbing some of it). With the external field (the RC-driven model
+    # scaled by 1.26, a uniform -22.5 nT and a within-hour trend: the RC index is hourly) the mean
+    # is [4.8, -6.9, -10.0] nT, rms [7.2, 7.3, 10.8] -- within the 15 nT the issue asks; over
+    # sensor seeds 1-6 the worst component was 11.4 nT.
     low = (np.abs(lat) < 40.0) & att.holdout
-    res_nec = frames.itrs_to_nec(np.einsum("nji,nj->ni", rot, residual), data.r_itrs_km)
-    base_nec = frames.itrs_to_nec(
-        np.einsum("nji,nj->ni", rot, att.baseline_residual_nt), data.r_itrs_km
+    before = _low_latitude_nec(data, att.baseline_residual_nt, rot, low).mean(axis=0)
+    after = _low_latitude_nec(data, att.final_residual_nt, rot, low).mean(axis=0)
+    print("low-latitude held-out mean NEC [nT]: calibration only", before.round(1), "with", after)
+    assert before[0] < -80.0
+    assert np.all(np.abs(after) <= 15.0)
+
+
+def test_swarm_storm_pass_without_a_prior_is_ambiguous() -> None:
+    """Without the calibration in service the 30-minute joint fit is ill-posed (why the prior).
+
+    The ring current at low latitude is nearly parallel to the main field, so a free scale factor
+    absorbs much of it: the verdict still names external_field, but the low-latitude held-out
+    residual keeps ~30 nT (measured [28.4, -15.6, -6.2] nT).
+    """
+    data, lat, rot = _swarm_storm_data()
+    report, att = diagnose_parts(
+        data, learned=False, holdout_blocks=2, fit_mask=np.abs(data.mlat_deg) < 50.0
     )
-    print(
-        "low-latitude held-out mean NEC [nT]: baseline",
-        base_nec[low].mean(0).round(1),
-        "with external_field",
-        res_nec[low].mean(0).round(1),
-        block.variant,
-    )
-    assert abs(float(np.mean(res_nec[low, 0]))) < 166.0 / 4
+    assert report["verdict"] == "external_field"
+    assert report["baseline"]["calibration_prior"] is None
+    low = (np.abs(lat) < 40.0) & att.holdout
+    after = _low_latitude_nec(data, att.final_residual_nt, rot, low).mean(axis=0)
+    assert 15.0 < float(np.max(np.abs(after))) < 166.0 / 4
 
 
 def _swarm_tles() -> list[object]:

@@ -1,8 +1,9 @@
 """``orbitcal diagnose``: where the sim-to-real gap lies and which unmodelled effect causes it.
 
 ``orbitcal diagnose TELEMETRY --tle TLE --out REPORT.json [--html REPORT.html]
-[--attitude-frame GCRS|ITRS] [--time-scale UTC|TAI|GPS] [--field NAME]`` writes the CONTRACT
-section-5 report (and optionally a self-contained HTML page with plots).
+[--attitude-frame GCRS|ITRS] [--time-scale UTC|TAI|GPS] [--field NAME] [--calibration CAL.json]``
+writes the CONTRACT section-5 report (and optionally a self-contained HTML page with plots).
+``--calibration`` takes the calibration in service as a prior on the 12 parameters.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import json
 from pathlib import Path
 
 from orbitcal.cli._inputs import add_field_argument, add_table_arguments, load_orbit, load_table
+from orbitcal.diagnose.prior import DEFAULT_SIGMA_MATRIX, DEFAULT_SIGMA_OFFSET_NT
 
 __all__ = ["register", "run"]
 
@@ -31,6 +33,29 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     add_field_argument(p)
     p.add_argument("--out", required=True, metavar="REPORT.json", help="output report (JSON)")
     p.add_argument("--html", metavar="REPORT.html", help="also write an HTML report with plots")
+    p.add_argument(
+        "--calibration",
+        metavar="CAL.json",
+        help=(
+            "the calibration in service (section-4 document): a prior on the 12 parameters, "
+            "needed on short spans such as a storm pass (widths: --prior-sigma-matrix, "
+            "--prior-sigma-offset)"
+        ),
+    )
+    p.add_argument(
+        "--prior-sigma-matrix",
+        type=float,
+        default=DEFAULT_SIGMA_MATRIX,
+        metavar="S",
+        help=f"prior standard deviation of each matrix element (default {DEFAULT_SIGMA_MATRIX:g})",
+    )
+    p.add_argument(
+        "--prior-sigma-offset",
+        type=float,
+        default=DEFAULT_SIGMA_OFFSET_NT,
+        metavar="NT",
+        help=f"prior standard deviation of each offset in nT (default {DEFAULT_SIGMA_OFFSET_NT:g})",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the learned model (default 0)")
     p.set_defaults(func=run)
 
@@ -51,9 +76,23 @@ def run(args: argparse.Namespace) -> int:
         need_attitude="the diagnosis compares vectors in the body frame and needs the attitude",
     )
     orbit = None if tel.r_itrs_km is not None else load_orbit(args, tel)
+    prior = None
+    if args.calibration:
+        from orbitcal.calibrate.document import read_document
+        from orbitcal.diagnose.prior import prior_from_document
+
+        prior = prior_from_document(
+            read_document(args.calibration),
+            sigma_a=args.prior_sigma_matrix,
+            sigma_o_nt=args.prior_sigma_offset,
+        )
     with threadpool_limits(1):
         data = diagnosis_data(
-            tel, orbit=orbit, field=args.field, attitude_frame=args.attitude_frame
+            tel,
+            orbit=orbit,
+            field=args.field,
+            attitude_frame=args.attitude_frame,
+            calibration_prior=prior,
         )
         report, att = diagnose_parts(data, rng=np.random.default_rng(args.seed))
         Path(args.out).write_text(json.dumps(report, indent=1) + "\n")

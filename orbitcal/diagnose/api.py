@@ -18,6 +18,7 @@ import numpy.typing as npt
 
 from orbitcal.diagnose.attribution import Attribution, attribute
 from orbitcal.diagnose.effects import DiagnosisData
+from orbitcal.diagnose.prior import CalibrationPrior
 from orbitcal.diagnose.report import build_report
 from orbitcal.diagnose.where import where_analysis
 
@@ -90,6 +91,7 @@ def diagnosis_data(
     attitude_frame: str = "GCRS",
     crust_model: str | None = DEFAULT_CRUST_MODEL,
     external_model: bool = True,
+    calibration_prior: CalibrationPrior | None = None,
 ) -> DiagnosisData:
     """Build the attribution's arrays from a telemetry table.
 
@@ -107,6 +109,10 @@ def diagnosis_data(
         samples at n = 185).
     external_model : bool
         Offer the RC-driven magnetospheric field to the external_field candidate.
+    calibration_prior : CalibrationPrior, optional
+        The calibration in service (:func:`orbitcal.diagnose.prior.prior_from_document`) as a
+        prior on the 12 parameters: needed on short spans where a large external field is nearly
+        parallel to the main field (a storm pass) and a free scale factor would absorb it.
     """
     from orbitcal import frames
     from orbitcal.sun import illumination_conical, sun_position_gcrs_km
@@ -173,6 +179,8 @@ def diagnosis_data(
         reference_field=truth.field_name,
         illumination=illumination,
         b_ext_body_nt=b_ext_body,
+        calibration_prior=calibration_prior,
+        positions_measured=telemetry.r_itrs_km is not None,
     )
 
 
@@ -186,6 +194,9 @@ def diagnose_parts(
     """Run the diagnosis on prepared arrays: the section-5 report and the attribution behind it."""
     att = attribute(data, **attribute_options)
     where = where_analysis(data, att.baseline_residual_nt, holdout=att.holdout)
+    where_final = (
+        where_analysis(data, att.final_residual_nt, holdout=att.holdout) if att.selected else None
+    )
     learned_result = None
     if learned:
         from orbitcal.diagnose.learned import learned_field_error
@@ -193,7 +204,7 @@ def diagnose_parts(
         learned_result = learned_field_error(
             data, att.final_residual_nt, train=att.train, holdout=att.holdout, rng=rng
         )
-    return build_report(data, att, where, learned=learned_result), att
+    return build_report(data, att, where, learned=learned_result, where_final=where_final), att
 
 
 def diagnose_data(
@@ -214,6 +225,7 @@ def diagnose(
     field: str = "IGRF-14",
     attitude_frame: str = "GCRS",
     rng: np.random.Generator | None = None,
+    calibration_prior: CalibrationPrior | None = None,
 ) -> dict[str, Any]:
     """Diagnose the sim-to-real gap of a telemetry table (CONTRACT section 5).
 
@@ -229,11 +241,19 @@ def diagnose(
     rng : numpy.random.Generator, optional
         Seeds the learned model's network initialisation (default: a fixed seed, so the report is
         reproducible).
+    calibration_prior : CalibrationPrior, optional
+        The calibration in service as a prior on the 12 parameters (see :func:`diagnosis_data`).
 
     Returns
     -------
     dict
         ``baseline``, ``verdict``, ``effects`` (ranked), ``where`` and supporting sections.
     """
-    data = diagnosis_data(telemetry, orbit=orbit, field=field, attitude_frame=attitude_frame)
+    data = diagnosis_data(
+        telemetry,
+        orbit=orbit,
+        field=field,
+        attitude_frame=attitude_frame,
+        calibration_prior=calibration_prior,
+    )
     return diagnose_data(data, rng=rng)

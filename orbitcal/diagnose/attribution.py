@@ -156,6 +156,7 @@ def fit_joint(
     iterations: int = 6,
     ridge_effects: float = 1e-5,
     huber_steps: int = 6,
+    use_prior: bool = True,
 ) -> JointFit:
     """Fit the 12 calibration parameters and the effect parameters on the samples ``fit_mask``.
 
@@ -178,6 +179,9 @@ def fit_joint(
     huber_steps : int
         Huber iterations before switching to Tukey's bisquare (default: Huber only; the bisquare
         is for data with a localised disturbance far above the noise, e.g. a storm pass).
+    use_prior : bool
+        Apply ``data.calibration_prior`` (if any) to the 12 calibration parameters; split fits,
+        which ask what the free parameters absorb, turn it off.
     """
     x_all, scale = _design(data, blocks)
     rows = np.repeat(fit_mask, 3)
@@ -191,11 +195,30 @@ def fit_joint(
     # collinear regressors (e.g. a current bump sampled at only two local times) from exploding;
     # the 12 calibration columns are left free.
     ridge = np.diag(np.r_[np.full(12, 1e-10), np.full(x.shape[1] - 12, ridge_effects)])
+    prior = data.calibration_prior if use_prior else None
+    prior_precision = np.zeros(x.shape[1])
+    prior_mean = np.zeros(x.shape[1])
+    if prior is not None:
+        # Unit-scaled parameters: theta_s = theta * scale, theta = (A * FIELD_SCALE_NT, o, ...).
+        sd = np.r_[np.full(9, prior.sigma_a * FIELD_SCALE_NT), np.full(3, prior.sigma_o_nt)]
+        prior_precision[:12] = 1.0 / (sd * scale[:12]) ** 2
+        prior_mean[:12] = np.r_[prior.a.ravel() * FIELD_SCALE_NT, prior.o_nt] * scale[:12]
+        # The data term is unweighted by the noise, so the prior is scaled by the noise variance:
+        # that of the same model fitted without the prior when the rows allow it (else of the
+        # prior calibration itself), fixed, so that a prior at odds with the data cannot inflate
+        # its own weight through the residual.
+        if x.shape[0] > 2 * x.shape[1] + 30:
+            coef0 = np.linalg.lstsq(x, y, rcond=None)[0]
+            r0 = y - x @ coef0
+        else:
+            r0 = y - x[:, :12] @ prior_mean[:12]
+        noise = max(float(1.4826 * np.median(np.abs(r0 - np.median(r0)))), 1e-6)
+        prior_precision *= noise**2
     for it in range(iterations if robust else 1):
         xw = x * w[:, None]
-        normal = x.T @ xw + ridge * x.shape[0]
+        normal = x.T @ xw + ridge * x.shape[0] + np.diag(prior_precision)
         try:
-            theta = np.linalg.solve(normal, xw.T @ y)
+            theta = np.linalg.solve(normal, xw.T @ y + prior_precision * prior_mean)
         except np.linalg.LinAlgError:  # pragma: no cover - singular design
             sw = np.sqrt(w)
             theta = np.asarray(np.linalg.lstsq(x * sw[:, None], y * sw, rcond=None)[0], float)
@@ -564,7 +587,8 @@ def attribute(
             selected.append(absorbed.name)
             step_scores.append(absorbed)
             effects = [absorbed] + [e for e in effects if e.name != absorbed.name]
-    regional = _regional_fac(data, r_base, train, holdout, selected)
+    # What the selected effects leave (e.g. a storm's auroral part once the ring current is in).
+    regional = _regional_fac(data, current_r, train, holdout, selected)
     if regional is not None and regional.significant:
         effects = [e for e in effects if e.name != regional.name]
         effects.insert(len(step_scores), regional)
@@ -650,7 +674,7 @@ QUIET_MLAT_DEG = 50.0
 
 def _regional_fac(
     data: DiagnosisData,
-    r_base: FloatArray,
+    r_now: FloatArray,
     train: BoolArray,
     holdout: BoolArray,
     selected: Sequence[str],
@@ -659,7 +683,8 @@ def _regional_fac(
 
     A single pass may cross the auroral oval only in its training part, or the currents change
     from crossing to crossing so that no model predicts the next one (nothing passes the held-out
-    test). The regional test asks instead whether the residual is localised
+    test). ``r_now`` is the residual of the selected model (the calibration alone when nothing is
+    selected). The regional test asks instead whether the residual is localised
     where field-aligned currents flow and shaped as they are: at |magnetic latitude| > 55 deg its
     RMS exceeds 3x that of quiet latitudes (< 50 deg), its part perpendicular to B exceeds 2x the
     part along B, and latitude bumps perpendicular to B (fitted to those samples) remove at least
@@ -690,15 +715,15 @@ def _regional_fac(
         return None
     g_all = np.stack(cols, axis=2)
     b_hat = data.b_hat_body
-    par = np.sum(r_base * b_hat, axis=1)
-    perp = r_base - par[:, None] * b_hat
-    rms_hi = vector_rms_nt(r_base[hi])
-    rms_lo = vector_rms_nt(r_base[lo])
+    par = np.sum(r_now * b_hat, axis=1)
+    perp = r_now - par[:, None] * b_hat
+    rms_hi = vector_rms_nt(r_now[hi])
+    rms_lo = vector_rms_nt(r_now[lo])
     perp_hi = vector_rms_nt(perp[hi])
     par_hi = float(np.sqrt(np.mean(par[hi] ** 2)))
     g = g_all[hi].reshape(-1, g_all.shape[2])
-    coef = np.linalg.lstsq(g, r_base[hi].reshape(-1), rcond=None)[0]
-    after = r_base[hi] - (g_all[hi] @ coef)
+    coef = np.linalg.lstsq(g, r_now[hi].reshape(-1), rcond=None)[0]
+    after = r_now[hi] - (g_all[hi] @ coef)
     rms_after = vector_rms_nt(after)
     significant = bool(
         rms_hi > 3.0 * rms_lo and perp_hi > 2.0 * par_hi and rms_after < 0.75 * rms_hi
@@ -744,7 +769,7 @@ def _split(
 ) -> SplitFit | None:
     if len(masks) < 2 or any(int(m.sum()) < 30 for m in masks):
         return None
-    fits = [fit_joint(data, m, blocks, robust=robust) for m in masks]
+    fits = [fit_joint(data, m, blocks, robust=robust, use_prior=False) for m in masks]
     offsets = np.array([f.o_nt for f in fits])
     var = []
     for f, m in zip(fits, masks, strict=True):

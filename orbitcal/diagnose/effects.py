@@ -30,6 +30,8 @@ from functools import cached_property
 import numpy as np
 import numpy.typing as npt
 
+from orbitcal.diagnose.prior import CalibrationPrior
+
 __all__ = [
     "CATALOGUE",
     "DIPOLE_POLE_LAT_DEG",
@@ -150,6 +152,11 @@ class DiagnosisData:
     b_ext_body_nt : ndarray, shape (N, 3), optional
         An RC-index-driven magnetospheric field model (``orbitcal.field`` ``"RC"``), body frame
         [nT].
+    calibration_prior : CalibrationPrior, optional
+        The calibration in service as a prior on the 12 parameters of every joint fit.
+    positions_measured : bool
+        True when positions come with the telemetry (GNSS, metre-level): orbit_error, which models
+        the along-track error of a propagated element set, is then no candidate.
     """
 
     t_utc_s: FloatArray
@@ -167,6 +174,8 @@ class DiagnosisData:
     reference_field: str = "IGRF-14"
     illumination: FloatArray | None = None
     b_ext_body_nt: FloatArray | None = None
+    calibration_prior: CalibrationPrior | None = None
+    positions_measured: bool = False
 
     def __post_init__(self) -> None:
         n = self.t_utc_s.shape[0]
@@ -206,6 +215,8 @@ class DiagnosisData:
             reference_field=self.reference_field,
             illumination=pick(self.illumination),  # type: ignore[arg-type]
             b_ext_body_nt=pick(self.b_ext_body_nt),  # type: ignore[arg-type]
+            calibration_prior=self.calibration_prior,
+            positions_measured=self.positions_measured,
         )
 
     def hk(self, name: str) -> FloatArray | None:
@@ -473,6 +484,14 @@ def _design_external(data: DiagnosisData, train: BoolArray) -> DesignBlock | Non
                 variant="rc_model",
             )
         )
+        # The RC index is hourly: a storm's ring current also changes within the hour.
+        options.append(
+            DesignBlock(
+                np.stack([axis, data.b_ext_body_nt, axis * tau[:, None]], axis=2),
+                ["uniform_along_dipole_nt", "rc_model_scale", "uniform_trend_nt_per_day"],
+                variant="rc_model+trend",
+            )
+        )
     return DesignBlock(options[0].g, options[0].names, options[0].variant, tuple(options[1:]))
 
 
@@ -517,6 +536,8 @@ def _design_nonlinearity(data: DiagnosisData, train: BoolArray) -> DesignBlock |
 
 
 def _design_orbit(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
+    if data.positions_measured:
+        return None  # GNSS positions: no element-set error to model
     grad = data.db_ref_body_ds_nt_km
     tau = _tau_days(data, train)
     growing = DesignBlock(
@@ -756,7 +777,8 @@ CATALOGUE: tuple[Effect, ...] = (
         "orbit_error",
         "along-track position error (constant plus growth with time): "
         "db = ds * dB/ds along the Earth-fixed track",
-        "residual follows the along-track gradient of the field, not the attitude motion",
+        "residual follows the along-track gradient of the field, not the attitude motion; "
+        "needs positions propagated from a TLE/OMM (not measured ones)",
         _design_orbit,
         absorbed_by_calibration=True,
     ),

@@ -55,8 +55,13 @@ def build_report(
     where: dict[str, Any],
     *,
     learned: dict[str, Any] | None = None,
+    where_final: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """Assemble the section-5 report from the attribution and where-analysis."""
+    """Assemble the section-5 report from the attribution and where-analysis.
+
+    ``where`` locates the calibration-only residual; ``where_final`` (optional) locates what the
+    selected effects leave, e.g. the auroral part of a storm once the ring current is modelled.
+    """
     effects = []
     for e in att.effects:
         eff = get_effect(e.name)
@@ -85,6 +90,9 @@ def build_report(
             "holdout_rms_nt": _num(att.baseline_rms_nt),
             "train_rms_nt": _num(att.baseline_train_rms_nt),
             "reference_field": data.reference_field,
+            "calibration_prior": (
+                data.calibration_prior.summary() if data.calibration_prior is not None else None
+            ),
         },
         "verdict": att.verdict,
         "effects": effects,
@@ -93,6 +101,7 @@ def build_report(
             "effects": list(att.selected),
             "holdout_rms_nt": _num(att.final_rms_nt),
             "shrink": _num(att.baseline_rms_nt / max(att.final_rms_nt, 1e-12)),
+            "where": _clean(where_final) if where_final is not None else None,
         },
         "split_fits": [
             _clean(
