@@ -86,10 +86,20 @@ def apply_linear(document: dict[str, Any], b_raw_nt: np.ndarray) -> np.ndarray:
 
 
 def diagnose(
-    telemetry: Telemetry, *, orbit: Any, attitude_frame: str, field: str = "IGRF-14"
+    telemetry: Telemetry,
+    *,
+    orbit: Any,
+    attitude_frame: str,
+    field: str = "IGRF-14",
+    prior_document: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """The section-5 diagnosis report on ``telemetry`` (``orbitcal.diagnose.diagnose``)."""
+    """The section-5 diagnosis report on ``telemetry`` (``orbitcal.diagnose.diagnose``).
+
+    ``prior_document``: a calibration document (the one in service) whose linear part is a prior
+    on the 12 parameters (``orbitcal.diagnose.prior``).
+    """
     from orbitcal.diagnose import diagnose as run
+    from orbitcal.diagnose.prior import prior_from_document
 
     report = run(
         telemetry,
@@ -97,5 +107,8 @@ def diagnose(
         field=field,
         attitude_frame=attitude_frame,
         rng=np.random.default_rng(0),
+        calibration_prior=(
+            prior_from_document(prior_document) if prior_document is not None else None
+        ),
     )
     return dict(report)

@@ -187,16 +187,23 @@ def residuals(
     }
 
 
-def _compute_diagnosis(app: Any, spacecraft_id: str) -> dict[str, Any]:
+def _compute_diagnosis(app: Any, spacecraft_id: str, prior: bool) -> dict[str, Any]:
     settings = app.state.settings
-    sc, tel, _doc = _recent_telemetry(app.state.engine, spacecraft_id, settings.window_s)
+    sc, tel, doc = _recent_telemetry(app.state.engine, spacecraft_id, settings.window_s)
+    if prior and doc is None:
+        raise ValueError(
+            f"prior=true needs a calibration in service and {spacecraft_id!r} has none yet"
+        )
     report = science.diagnose(
         tel,
         orbit=science.load_orbit(sc.tle, sc.omm),
         attitude_frame=sc.attitude_frame,
         field=settings.reference_field,
+        prior_document=doc if prior else None,
     )
-    app.state.diagnosis_cache[spacecraft_id] = (int(sc.sample_count), report)
+    if prior:
+        report["baseline"]["calibration_prior"]["version"] = doc.get("version")
+    app.state.diagnosis_cache[(spacecraft_id, prior)] = (int(sc.sample_count), report)
     return report
 
 
@@ -205,14 +212,15 @@ def _spacecraft(engine: Any, spacecraft_id: str) -> Any:
         return get_spacecraft(conn, spacecraft_id)
 
 
-def _diagnosis_future(app: Any, spacecraft_id: str) -> Future[dict[str, Any]]:
+def _diagnosis_future(app: Any, spacecraft_id: str, prior: bool) -> Future[dict[str, Any]]:
     """The running computation for this spacecraft, or a new one (one at a time per spacecraft)."""
-    running: dict[str, Future[dict[str, Any]]] = app.state.diagnosis_running
+    running: dict[tuple[str, bool], Future[dict[str, Any]]] = app.state.diagnosis_running
+    key = (spacecraft_id, prior)
     with app.state.diagnosis_lock:
-        fut = running.get(spacecraft_id)
+        fut = running.get(key)
         if fut is None or fut.done():
-            fut = app.state.diagnosis_pool.submit(_compute_diagnosis, app, spacecraft_id)
-            running[spacecraft_id] = fut
+            fut = app.state.diagnosis_pool.submit(_compute_diagnosis, app, spacecraft_id, prior)
+            running[key] = fut
         return fut
 
 
@@ -232,28 +240,37 @@ async def diagnosis(
             "of computing one on the current data"
         ),
     ] = False,
+    prior: Annotated[
+        bool,
+        Query(
+            description="take the calibration in service as a prior on the 12 parameters (for "
+            "short windows, e.g. a storm, where a free scale factor absorbs the external field)"
+        ),
+    ] = False,
 ) -> dict[str, Any]:
     """A diagnosis report (CONTRACT section 5) on the stored telemetry's recent window.
 
     Reports are computed in a background thread (one computation per spacecraft at a time) and
     kept per spacecraft until new samples arrive; without ``cached`` the call waits for a report
     on the current data (minutes for a day of data), with ``cached=true`` it answers the latest
-    report at once.
+    report at once. With ``prior=true`` the calibration in service is the prior of every fit
+    (``baseline.calibration_prior`` names its version); 422 when none is in service.
     """
     app = request.app
     sc = await run_in_threadpool(_spacecraft, engine, spacecraft_id)
-    hit = app.state.diagnosis_cache.get(spacecraft_id)
+    key = (spacecraft_id, prior)
+    hit = app.state.diagnosis_cache.get(key)
     if hit is not None and (cached or hit[0] == int(sc.sample_count)):
         return hit[1]  # type: ignore[no-any-return]
     if cached:
-        computing = app.state.diagnosis_running.get(spacecraft_id)
+        computing = app.state.diagnosis_running.get(key)
         state = "one is being computed" if computing and not computing.done() else "none asked for"
         raise HTTPException(
             status_code=404,
             detail=f"no diagnosis of {spacecraft_id!r} yet ({state}); "
             "GET without cached=true computes one",
         )
-    fut = _diagnosis_future(app, spacecraft_id)
+    fut = _diagnosis_future(app, spacecraft_id, prior)
     try:
         return await asyncio.wrap_future(fut)
     except ValueError as exc:

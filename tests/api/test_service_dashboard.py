@@ -62,7 +62,7 @@ def test_dashboard_shows_spacecraft_versions_residuals_and_diagnosis(tmp_path: P
             ],
             "where": {"axis_rms_nt": [7.0, 6.0, 8.0]},
         }
-        server.app.state.diagnosis_cache["swarm-a"] = (3000, report)
+        server.app.state.diagnosis_cache[("swarm-a", False)] = (3000, report)
         assert c.get("/v1/spacecraft/swarm-a/diagnosis?cached=true").json() == report
         assert c.get("/v1/spacecraft/swarm-a/diagnosis").json() == report  # current: no recompute
         profile = tmp_path / "chromium-profile"

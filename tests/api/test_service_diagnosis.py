@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from service_helpers import live_server, sqlite_settings
+from service_helpers import live_server, sqlite_settings, wait_job
 
 from orbitcal.diagnose.effects import EFFECT_NAMES
 from orbitcal.simulate import make_effect, simulate_world
@@ -65,3 +65,16 @@ def test_diagnosis_over_http_names_the_injected_magnetorquer_coupling(tmp_path: 
 
         again = c.get("/v1/spacecraft/sw-a/diagnosis?cached=true")
         assert again.status_code == 200 and again.json() == report
+
+        # prior=true: the calibration in service as the prior of every fit (none yet -> 422).
+        r = c.get("/v1/spacecraft/sw-a/diagnosis?prior=true", timeout=300)
+        assert r.status_code == 422 and "no" in r.json()["detail"] and "in service" in r.text
+        job = wait_job(c, c.post("/v1/spacecraft/sw-a/calibrations").json()["job_id"])
+        assert job["status"] == "succeeded", job
+        r = c.get("/v1/spacecraft/sw-a/diagnosis?prior=true", timeout=300)
+        assert r.status_code == 200, r.text
+        with_prior = r.json()
+        assert with_prior["baseline"]["calibration_prior"]["version"] == 1
+        assert with_prior["verdict"] == "magnetorquer"
+        # The plain report is cached apart and unchanged.
+        assert c.get("/v1/spacecraft/sw-a/diagnosis?cached=true").json() == report
