@@ -670,6 +670,9 @@ def _absorbed_by_calibration(
 #: |magnetic latitude| above which field-aligned currents flow / below which data are quiet [deg].
 AURORAL_MLAT_DEG = 55.0
 QUIET_MLAT_DEG = 50.0
+#: Chunk length [s] and folds of the regional test's cross-validation within auroral crossings.
+FAC_CV_CHUNK_S = 20.0
+FAC_CV_FOLDS = 5
 
 
 def _regional_fac(
@@ -687,8 +690,9 @@ def _regional_fac(
     selected). The regional test asks instead whether the residual is localised
     where field-aligned currents flow and shaped as they are: at |magnetic latitude| > 55 deg its
     RMS exceeds 3x that of quiet latitudes (< 50 deg), its part perpendicular to B exceeds 2x the
-    part along B, and latitude bumps perpendicular to B (fitted to those samples) remove at least
-    a quarter of it. Reported with ``judged_on`` saying so.
+    part along B, and latitude bumps perpendicular to B, fitted on four fifths of the crossing
+    (20 s chunks dealt round-robin), predict the remaining fifth with at least a quarter less RMS.
+    Reported with ``judged_on`` saying so.
     """
     if "field_aligned_currents" in selected:
         return None
@@ -721,16 +725,27 @@ def _regional_fac(
     rms_lo = vector_rms_nt(r_now[lo])
     perp_hi = vector_rms_nt(perp[hi])
     par_hi = float(np.sqrt(np.mean(par[hi] ** 2)))
-    g = g_all[hi].reshape(-1, g_all.shape[2])
-    coef = np.linalg.lstsq(g, r_now[hi].reshape(-1), rcond=None)[0]
-    after = r_now[hi] - (g_all[hi] @ coef)
-    rms_after = vector_rms_nt(after)
+    # Cross-validated within the crossings: consecutive FAC_CV_CHUNK_S chunks are dealt round-robin
+    # to FAC_CV_FOLDS folds; the bumps fitted on the other folds predict each fold.
+    idx = np.flatnonzero(hi)
+    chunk = ((data.t_utc_s[idx] - data.t_utc_s[idx[0]]) // FAC_CV_CHUNK_S).astype(int)
+    fold = chunk % FAC_CV_FOLDS
+    pred = np.zeros((idx.size, 3))
+    for f in range(FAC_CV_FOLDS):
+        fit_rows, test_rows = idx[fold != f], idx[fold == f]
+        if test_rows.size == 0:
+            continue
+        g = g_all[fit_rows].reshape(-1, g_all.shape[2])
+        coef = np.linalg.lstsq(g, r_now[fit_rows].reshape(-1), rcond=None)[0]
+        pred[fold == f] = g_all[test_rows] @ coef
+    rms_after = vector_rms_nt(r_now[hi] - pred)
     significant = bool(
         rms_hi > 3.0 * rms_lo and perp_hi > 2.0 * par_hi and rms_after < 0.75 * rms_hi
     )
     params: dict[str, Any] = {
-        "judged_on": "in sample, |magnetic latitude| > 55 deg (regional test: the held-out test "
-        "cannot judge currents that change from crossing to crossing or lie outside it)",
+        "judged_on": f"|magnetic latitude| > {AURORAL_MLAT_DEG:.0f} deg, cross-validated within "
+        f"the crossings ({FAC_CV_FOLDS} folds of {FAC_CV_CHUNK_S:.0f} s chunks): the held-out "
+        "blocks cannot judge currents that change from crossing to crossing or lie outside them",
         "rms_high_latitude_nt": rms_hi,
         "rms_quiet_latitude_nt": rms_lo,
         "perpendicular_rms_high_latitude_nt": perp_hi,
