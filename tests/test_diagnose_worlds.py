@@ -230,6 +230,7 @@ def make_world(
         rc_index_nt=rc,
         b_crust_body_nt=crust_model,
         crust_model="test-crust",
+        reference_fn=lambda _t, r: dipole_b_itrs_nt(r),
     )
     return World(data=data, injected_nt=injected, truth=truth)
 

@@ -510,6 +510,7 @@ def attribute(
         single[name] = (fit, r, rms, p)
 
     selected: list[str] = []
+    indistinguishable: dict[str, list[str]] = {}
     chosen_blocks: list[DesignBlock] = []
     step_scores: list[EffectScore] = []
     current_r = r_base
@@ -538,7 +539,13 @@ def attribute(
         best_rms = min(c[3] for c in passing)
         tied = [c for c in passing if c[3] <= best_rms * (1.0 + tie_tolerance)]
         best = min(tied, key=lambda c: _bic(c[1], c[2], train))
+        # Models the data cannot tell apart are reported with the one named (e.g. under steady
+        # attitude rates a time-tag error and an along-track orbit error differ only by the
+        # Earth's rotation once the 12 parameters absorb the attitude term).
+        twins = [c for c in tied if c[0] != best[0] and _twins(c, best, train)]
         name, fit, r, rms, p = best
+        if twins:
+            indistinguishable[name] = sorted(c[0] for c in twins)
         selected.append(name)
         chosen_blocks.append(fit.blocks[-1])
         step_scores.append(
@@ -562,6 +569,8 @@ def attribute(
     effects: list[EffectScore] = []
     for k, sc in enumerate(step_scores):
         params = _params(current_fit, k)  # final joint values
+        if sc.name in indistinguishable:
+            params["indistinguishable_from"] = indistinguishable[sc.name]
         effects.append(
             EffectScore(
                 sc.name,
@@ -665,6 +674,19 @@ def _absorbed_by_calibration(
         "split_z_with_effect": z,
     }
     return EffectScore(name, True, base_rms, base_rms, float("nan"), params, step=1)
+
+
+#: Two fitted models whose predictions on the training samples differ by less than this, in
+#: units of the noise variance summed over samples (the non-centrality of the likelihood-ratio
+#: test between them), cannot be told apart by the data: a 3-sigma separation.
+TWIN_SEPARATION = 9.0
+
+
+def _twins(a: tuple[Any, ...], b: tuple[Any, ...], train: BoolArray) -> bool:
+    """Whether two candidate fits ``(name, fit, residual, rms, p)`` predict the same data."""
+    d = a[2][train] - b[2][train]  # difference of residuals = difference of predictions
+    sigma = max(min(a[1].sigma_nt, b[1].sigma_nt), 1e-9)
+    return bool(float(np.sum(d**2)) / sigma**2 < TWIN_SEPARATION)
 
 
 #: |magnetic latitude| above which field-aligned currents flow / below which data are quiet [deg].

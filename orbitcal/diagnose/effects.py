@@ -52,6 +52,9 @@ BoolArray = npt.NDArray[np.bool_]
 DIPOLE_POLE_LAT_DEG = 80.65
 DIPOLE_POLE_LON_DEG = -72.68
 
+#: Earth rotation rate about the ITRS z axis [rad/s] (IERS nominal).
+EARTH_ROTATION_RAD_S = 7.292115e-5
+
 #: Field scale used to keep design columns near unit size [nT].
 FIELD_SCALE_NT = 5.0e4
 
@@ -157,6 +160,9 @@ class DiagnosisData:
     positions_measured : bool
         True when positions come with the telemetry (GNSS, metre-level): orbit_error, which models
         the along-track error of a propagated element set, is then no candidate.
+    reference_fn : callable, optional
+        ``reference_fn(t_utc_s, r_itrs_km) -> b_itrs_nt``: the reference field anywhere, for
+        gradients off the track; default the ``orbitcal.truth`` model named ``reference_field``.
     """
 
     t_utc_s: FloatArray
@@ -176,6 +182,7 @@ class DiagnosisData:
     b_ext_body_nt: FloatArray | None = None
     calibration_prior: CalibrationPrior | None = None
     positions_measured: bool = False
+    reference_fn: Callable[[FloatArray, FloatArray], FloatArray] | None = None
 
     def __post_init__(self) -> None:
         n = self.t_utc_s.shape[0]
@@ -217,6 +224,7 @@ class DiagnosisData:
             b_ext_body_nt=pick(self.b_ext_body_nt),  # type: ignore[arg-type]
             calibration_prior=self.calibration_prior,
             positions_measured=self.positions_measured,
+            reference_fn=self.reference_fn,
         )
 
     def hk(self, name: str) -> FloatArray | None:
@@ -283,6 +291,52 @@ class DiagnosisData:
         """
         db_itrs = _time_derivative(self.t_utc_s, self.b_ref_itrs_nt) / self.speed_itrs_km_s[:, None]
         return np.einsum("nij,nj->ni", self.rot_itrs_to_body, db_itrs)
+
+    @cached_property
+    def db_ref_body_drtn_nt_km(self) -> FloatArray:
+        """Gradients of the reference field along radial, along-track, cross-track [nT/km].
+
+        Shape (N, 3, 3): ``[:, :, k]`` is the body-frame field change per km of displacement along
+        the k-th of (radial, inertial along-track, orbit normal). An element set that is late or
+        early puts the spacecraft elsewhere in its orbit at the same time: the displacement is
+        along the inertial velocity, while the Earth stays where it is. The ground-track
+        derivative (:attr:`db_ref_body_ds_nt_km`) instead follows the velocity relative to the
+        Earth, which is what a time-tag error produces; the two differ by the Earth's rotation
+        (0.46 km/s x cos(latitude) of 7.6 km/s, mostly across track), and after the 12 parameters
+        absorb the attitude term of a steady spin, that difference is all that tells the two
+        effects apart. Central differences of the reference field (``reference_fn``, else the
+        model named ``reference_field``) over +-5 km, rotated into the body frame.
+        """
+        field_fn = self.reference_fn
+        if field_fn is None:
+            from orbitcal.truth import reference_field_itrs_nt
+
+            name = self.reference_field
+
+            def field_fn(t: FloatArray, r: FloatArray) -> FloatArray:
+                return np.asarray(reference_field_itrs_nt(t, r, field=name))
+
+        r = self.r_itrs_km
+        omega = np.array([0.0, 0.0, EARTH_ROTATION_RAD_S])
+        v_in = _time_derivative(self.t_utc_s, r) + np.cross(omega, r)
+        radial = r / np.linalg.norm(r, axis=1, keepdims=True)
+        normal = np.cross(radial, v_in)
+        normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
+        along = np.cross(normal, radial)
+        h_km = 5.0
+        out = np.empty((self.n, 3, 3))
+        for k, u in enumerate((radial, along, normal)):
+            plus = np.asarray(field_fn(self.t_utc_s, r + h_km * u))
+            minus = np.asarray(field_fn(self.t_utc_s, r - h_km * u))
+            out[:, :, k] = np.einsum(
+                "nij,nj->ni", self.rot_itrs_to_body, (plus - minus) / (2.0 * h_km)
+            )
+        return out
+
+    @property
+    def db_ref_body_ds_inertial_nt_km(self) -> FloatArray:
+        """Gradient along the inertial along-track direction, body frame [nT/km] (see above)."""
+        return self.db_ref_body_drtn_nt_km[:, :, 1]
 
     @cached_property
     def dipole_axis_body(self) -> FloatArray:
@@ -454,7 +508,20 @@ def _design_magnetorquer(data: DiagnosisData, train: BoolArray) -> DesignBlock |
 
 
 def _design_time_offset(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
-    return DesignBlock(data.db_ref_body_dt_nt_s[:, :, None], ["dt_s"])
+    first = data.db_ref_body_dt_nt_s
+    # Second order of the shift, b(t + dt) - b(t) = dt b' + dt^2 b''/2: under a fast spin the
+    # cross term of the body rate and the along-track change of the field (not absorbed by the
+    # 12 parameters) reaches ~1 nT for dt = 1 s at 1 deg/s; its coefficient is free (~dt^2).
+    second = 0.5 * _time_derivative(data.t_utc_s, first)
+    return DesignBlock(
+        first[:, :, None],
+        ["dt_s"],
+        alternatives=(
+            DesignBlock(
+                np.stack([first, second], axis=2), ["dt_s", "dt_squared_s2"], "second_order"
+            ),
+        ),
+    )
 
 
 def _design_external(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
@@ -538,14 +605,51 @@ def _design_nonlinearity(data: DiagnosisData, train: BoolArray) -> DesignBlock |
 def _design_orbit(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
     if data.positions_measured:
         return None  # GNSS positions: no element-set error to model
-    grad = data.db_ref_body_ds_nt_km
+    grads = data.db_ref_body_drtn_nt_km
+    grad = grads[:, :, 1]
     tau = _tau_days(data, train)
     growing = DesignBlock(
         np.stack([grad, grad * tau[:, None]], axis=2),
         ["along_track_km", "along_track_rate_km_per_day"],
         variant="growing",
     )
-    return DesignBlock(grad[:, :, None], ["along_track_km"], "constant", alternatives=(growing,))
+    # An element set's error in all three directions (Hill / Clohessy-Wiltshire motion): the
+    # along-track error grows; an eccentricity error adds once-per-rev radial and (twice as large)
+    # along-track terms, an inclination or node error once-per-rev cross-track terms.
+    u = data.orbit_phase_rad
+    c, sn = np.cos(u)[:, None], np.sin(u)[:, None]
+    rad, nrm = grads[:, :, 0], grads[:, :, 2]
+    rtn = DesignBlock(
+        np.stack(
+            [
+                grad,
+                grad * tau[:, None],
+                grad * c,
+                grad * sn,
+                rad,
+                rad * c,
+                rad * sn,
+                nrm * c,
+                nrm * sn,
+            ],
+            axis=2,
+        ),
+        [
+            "along_track_km",
+            "along_track_rate_km_per_day",
+            "along_track_cos_km",
+            "along_track_sin_km",
+            "radial_km",
+            "radial_cos_km",
+            "radial_sin_km",
+            "cross_track_cos_km",
+            "cross_track_sin_km",
+        ],
+        variant="rtn",
+    )
+    return DesignBlock(
+        grad[:, :, None], ["along_track_km"], "constant", alternatives=(growing, rtn)
+    )
 
 
 def _design_drift(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
@@ -776,7 +880,7 @@ CATALOGUE: tuple[Effect, ...] = (
     Effect(
         "orbit_error",
         "along-track position error (constant plus growth with time): "
-        "db = ds * dB/ds along the Earth-fixed track",
+        "db = ds * dB/ds along the inertial velocity (the Earth fixed at the sample time)",
         "residual follows the along-track gradient of the field, not the attitude motion; "
         "needs positions propagated from a TLE/OMM (not measured ones)",
         _design_orbit,

@@ -299,7 +299,8 @@ class OrbitErrorEffect(Effect):
     With ``true_tle`` (text holding a later, better element set of the same spacecraft; from a
     file of many sets the one of this NORAD id nearest the start is used) the true position is
     propagated from it; otherwise the spacecraft is ``along_track_km`` ahead of its
-    TLE position (evaluated at ``t + along_track_km / |v|``). ``dB = R(q) [B(r_true) − B(r_tle)]``
+    TLE position (its inertial position at ``t + along_track_km / |v|``, the Earth at ``t``).
+    ``dB = R(q) [B(r_true) − B(r_tle)]``
     with the reported (true) attitude. ``info`` records the along-track separation.
     """
 
@@ -320,9 +321,12 @@ class OrbitErrorEffect(Effect):
             r_true_itrs = kinematics(true_set, state.attitude, t).r_itrs_km
             r_true_gcrs = frames.itrs_to_gcrs(r_true_itrs, t)
         else:
+            # Ahead in its orbit at the same time: the inertial position of t + ds/|v|, with the
+            # Earth where it is at t (advancing the Earth too would be a time-tag error instead,
+            # ~0.46 km/s x cos(lat) of ground-track difference).
             kin = state.kinematics_at(t + float(self.along_track_km) / speed)
-            r_true_itrs = kin.r_itrs_km
-            r_true_gcrs = frames.itrs_to_gcrs(r_true_itrs, t)
+            r_true_gcrs = kin.r_gcrs_km
+            r_true_itrs = frames.gcrs_to_itrs(r_true_gcrs, t)
         along_km = np.sum((r_true_gcrs - state.r_gcrs_km) * v, axis=1) / speed
         b_true = state.field_body_nt(t, r_itrs_km=r_true_itrs, q_wxyz=state.q_wxyz)
         return Injection(
