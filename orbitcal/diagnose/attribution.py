@@ -411,16 +411,26 @@ def _chunk_test(r_before: FloatArray, r_after: FloatArray, n_chunks: int) -> tup
     return float(res.pvalue), mean
 
 
-def _support(fit: JointFit, train: BoolArray, holdout: BoolArray, n_chunks: int) -> BoolArray:
+def _support(
+    fit: JointFit, train: BoolArray, holdout: BoolArray, n_chunks: int, n_chunks_local: int
+) -> tuple[BoolArray, int]:
     """Held-out samples where the candidate's fitted field matters (> 10 % of its training peak).
 
     Localised effects (field-aligned currents, a patchy crust) are tested where they act; the
-    support depends on positions and the training fit only, never on held-out residuals.
+    support depends on positions and the training fit only, never on held-out residuals. Returns
+    the support and the number of chunks to cut it into (``n_chunks_local`` when it covers less
+    than half of the held-out samples).
     """
     mag = np.linalg.norm(fit.effect_nt(len(fit.blocks) - 1), axis=1)
     peak = float(np.percentile(mag[train], 99)) if np.any(train) else 0.0
     sup = holdout & (mag > 0.1 * peak)
-    return sup if int(sup.sum()) >= 3 * n_chunks else holdout
+    if int(sup.sum()) < 3 * n_chunks_local:
+        return holdout, n_chunks
+    if int(sup.sum()) > 0.5 * int(holdout.sum()):
+        return sup, n_chunks
+    # An effect confined to less than half of the held-out span (a few auroral crossings) is
+    # tested on fewer, longer chunks, each spanning whole parts of a crossing.
+    return sup, n_chunks_local
 
 
 def _params(fit: JointFit, k: int) -> dict[str, Any]:
@@ -437,7 +447,8 @@ def attribute(
     candidates: Sequence[Effect] = CATALOGUE,
     n_blocks: int = 10,
     holdout_blocks: int = 3,
-    n_chunks: int = 16,
+    n_chunks: int = 32,
+    n_chunks_local: int = 16,
     alpha: float = 0.05,
     min_gain: float = 0.03,
     max_steps: int = 3,
@@ -458,6 +469,9 @@ def attribute(
         Equal-duration time blocks; the last ``holdout_blocks`` are held out.
     n_chunks : int
         Consecutive chunks of the held-out span for the significance test.
+    n_chunks_local : int
+        Chunks for an effect confined to less than half of the held-out span (e.g. auroral
+        crossings), so that each chunk still spans a whole part of a crossing.
     alpha : float
         Family-wise significance level per selection step (Bonferroni over candidates).
     min_gain : float
@@ -505,8 +519,8 @@ def attribute(
     single: dict[str, tuple[JointFit, FloatArray, float, float]] = {}
     for name, block in designs.items():
         fit, r, rms = evaluate([], block)
-        sup = _support(fit, train, holdout, n_chunks)
-        p, _ = _chunk_test(r_base[sup], r[sup], n_chunks)
+        sup, chunks = _support(fit, train, holdout, n_chunks, n_chunks_local)
+        p, _ = _chunk_test(r_base[sup], r[sup], chunks)
         single[name] = (fit, r, rms, p)
 
     selected: list[str] = []
@@ -527,8 +541,8 @@ def attribute(
                 fit, r, rms, p = single[name]
             else:
                 fit, r, rms = evaluate(chosen_blocks, designs[name])
-                sup = _support(fit, train, holdout, n_chunks)
-                p, _ = _chunk_test(current_r[sup], r[sup], n_chunks)
+                sup, chunks = _support(fit, train, holdout, n_chunks, n_chunks_local)
+                p, _ = _chunk_test(current_r[sup], r[sup], chunks)
             if p < level and rms < current_rms * (1.0 - min_gain):
                 passing.append((name, fit, r, rms, p))
         if not passing:
