@@ -95,7 +95,8 @@ def run_diagnose(args: argparse.Namespace) -> int:
     s = result["summary"]
     print(
         f"cases {s['cases']}: top-1 {s['top1']:.1%} "
-        f"(min per effect {s['min_top1_per_effect']:.1%}), "
+        f"(strict {s['top1_strict']:.1%}, {s['unobservable_cases']} worlds without a gap; "
+        f"min per effect {s['min_top1_per_effect']:.1%}), "
         f"false alarms on null {s['false_alarm_rate']:.1%}, shrink vs oracle "
         f"{s['shrink_vs_oracle_mean']:.3f} (pooled {s['shrink_vs_oracle_pooled']:.3f}), "
         f"{wall:.0f} s"
