@@ -123,3 +123,21 @@ def test_learned_model_does_not_invent_a_field_from_noise() -> None:
     learned = report["learned"]
     assert learned["stage_chosen"] == "none"
     assert learned["holdout_rms_after_nt"] <= 1.01 * learned["holdout_rms_before_nt"]
+    # ... so no crustal_field candidate is made of it, and nothing is named.
+    assert "candidate" not in learned
+    assert report["verdict"] == "none"
+
+
+def test_learned_model_is_the_crust_candidate_without_a_crust_model() -> None:
+    """No crustal model offered: the seed-003 model, fitted on the training blocks only, stands
+    in for one, and the attribution names crustal_field on the held-out blocks."""
+    from orbitcal.diagnose.api import LEARNED_CRUST, diagnose_parts
+
+    data = _multi_day_data(4.0, crust=True)
+    report, _ = diagnose_parts(data, rng=np.random.default_rng(0))  # type: ignore[arg-type]
+    assert report["verdict"] == "crustal_field"
+    top = report["effects"][0]
+    assert top["params"]["variant"] == LEARNED_CRUST and top["significant"]
+    print("learned crust candidate:", top["holdout_rms_before_nt"], top["holdout_rms_after_nt"])
+    assert top["shrink"] > 1.8
+    assert report["learned"]["candidate"] == f"crustal_field ({LEARNED_CRUST})"

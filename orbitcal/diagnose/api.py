@@ -191,20 +191,72 @@ def diagnose_parts(
     learned: bool = True,
     **attribute_options: Any,
 ) -> tuple[dict[str, Any], Attribution]:
-    """Run the diagnosis on prepared arrays: the section-5 report and the attribution behind it."""
+    """Run the diagnosis on prepared arrays: the section-5 report and the attribution behind it.
+
+    Without a crustal model (``data.b_crust_body_nt`` None) and with ``learned``, the seed-003
+    model is first fitted to the calibration residual of the training blocks; if its training-only
+    cross-validation keeps a stage, its correction is the crustal_field candidate (``variant``
+    ``"learned (seed 003)"``), judged on the held-out blocks like any other.
+    """
+    learned_result = None
+    if learned and data.b_crust_body_nt is None:
+        data, learned_result = _with_learned_crust(data, rng=rng, **attribute_options)
     att = attribute(data, **attribute_options)
     where = where_analysis(data, att.baseline_residual_nt, holdout=att.holdout)
     where_final = (
         where_analysis(data, att.final_residual_nt, holdout=att.holdout) if att.selected else None
     )
-    learned_result = None
-    if learned:
+    if learned and learned_result is None:
         from orbitcal.diagnose.learned import learned_field_error
 
         learned_result = learned_field_error(
             data, att.final_residual_nt, train=att.train, holdout=att.holdout, rng=rng
         )
+        learned_result["fitted_to"] = "the final model's residual on the training blocks"
     return build_report(data, att, where, learned=learned_result, where_final=where_final), att
+
+
+#: Name of the crustal_field variant the seed-003 model stands for.
+LEARNED_CRUST = "learned (seed 003)"
+
+
+def _with_learned_crust(
+    data: DiagnosisData, *, rng: np.random.Generator | None, **attribute_options: Any
+) -> tuple[DiagnosisData, dict[str, Any] | None]:
+    """The data with the seed-003 correction as crustal model, and the model's summary.
+
+    ``(data, None)`` when the training blocks are too few for attribution; the summary with the
+    data unchanged when the model keeps no stage.
+    """
+    import dataclasses
+    import inspect
+
+    from orbitcal.diagnose.attribution import fit_joint, time_blocks
+    from orbitcal.diagnose.learned import learned_field_model
+
+    defaults = inspect.signature(attribute).parameters
+    train, holdout, _ = time_blocks(
+        data.t_utc_s,
+        n_blocks=int(attribute_options.get("n_blocks", defaults["n_blocks"].default)),
+        holdout_blocks=int(
+            attribute_options.get("holdout_blocks", defaults["holdout_blocks"].default)
+        ),
+    )
+    fit_mask = attribute_options.get("fit_mask")
+    if fit_mask is not None:
+        train = train & np.asarray(fit_mask, dtype=bool)
+    if int(train.sum()) < 30:
+        return data, None  # attribute() explains why it cannot run
+    base = fit_joint(data, train)
+    summary, correction = learned_field_model(
+        data, data.b_raw_nt - base.predict_nt(data), train=train, holdout=holdout, rng=rng
+    )
+    summary["fitted_to"] = "the calibration-only residual of the training blocks"
+    if summary["stage_chosen"] == "none":
+        return data, summary
+    summary["candidate"] = f"crustal_field ({LEARNED_CRUST})"
+    replaced = dataclasses.replace(data, b_crust_body_nt=correction, crust_model=LEARNED_CRUST)
+    return replaced, summary
 
 
 def diagnose_data(

@@ -67,6 +67,7 @@ __all__ = [
     "N_HIDDEN",
     "SH_MAX_DEGREE",
     "learned_field_error",
+    "learned_field_model",
     "legendre_design",
     "sh_design_nec",
 ]
@@ -408,6 +409,27 @@ def learned_field_error(
 ) -> dict[str, Any]:
     """Fit the seed-003 model to a residual on ``train``; score it on ``holdout``.
 
+    The summary of :func:`learned_field_model` (see there).
+    """
+    return learned_field_model(
+        data, residual_body_nt, train=train, holdout=holdout, rng=rng, max_nfev=max_nfev
+    )[0]
+
+
+def learned_field_model(
+    data: DiagnosisData,
+    residual_body_nt: FloatArray,
+    *,
+    train: BoolArray,
+    holdout: BoolArray,
+    rng: np.random.Generator | None = None,
+    max_nfev: int = 60,
+) -> tuple[dict[str, Any], FloatArray]:
+    """Fit the seed-003 model to a residual on ``train``; score it on ``holdout``.
+
+    Returns the summary below and the model's correction at every sample, body axes [nT]
+    (zero when the chosen stage is ``none``), fitted on ``train`` only.
+
     Parameters
     ----------
     data : DiagnosisData
@@ -535,7 +557,7 @@ def learned_field_error(
     before = _rms(residual_body_nt[holdout])
     after = held(after_nec)
     deg = int(sh["degree"])
-    return {
+    summary = {
         "method": (
             "CN109855623A: regional Legendre polynomials + BP network, with a global "
             "internal spherical-harmonic stage chosen by cross-validation on the training blocks"
@@ -566,3 +588,4 @@ def learned_field_error(
             comp: coef[:, k].round(4).tolist() for k, comp in enumerate(("N", "E", "C"))
         },
     }
+    return summary, body(after_nec)
