@@ -6,9 +6,10 @@ how much it shrinks the residual on the later, held-out blocks that no fit saw (
 held-out data are always later time blocks, never random rows).
 
 Greedy forward selection adds, one at a time, the candidate with the lowest held-out RMS among those
-that beat the current model *significantly*: the held-out span is cut into consecutive chunks, the
-per-chunk drop of the mean squared residual is tested with a one-sided t-test (Bonferroni over the
-candidates of the step), and the RMS must shrink by at least ``min_gain``. When nothing passes, no
+that beat the current model *significantly*: the held-out span (or, for a localised effect, the
+part where it acts) is cut into consecutive chunks, the per-chunk log ratio of the mean squared
+residual is tested with a one-sided Wilcoxon signed-rank test (Bonferroni over the candidates of
+the step), and the RMS must shrink by at least ``min_gain``. When nothing passes, no
 effect is named (verdict ``"none"``). The selected set is then scored drop-one (each effect's unique
 contribution).
 
@@ -292,7 +293,8 @@ class EffectScore:
         Held-out vector RMS without and with the effect [nT]. For a selected effect "before" is the
         model of the previous selection step; for the others it is the baseline.
     p_value : float
-        One-sided t-test of the per-chunk drop of the held-out mean square.
+        One-sided Wilcoxon signed-rank test of the per-chunk log ratio of the held-out mean
+        square.
     params : dict
         Fitted parameters (units in the names) and the model variant.
     unique_rms_increase_nt : float
@@ -492,7 +494,7 @@ def attribute(
     train, holdout, _ = time_blocks(data.t_utc_s, n_blocks=n_blocks, holdout_blocks=holdout_blocks)
     if fit_mask is not None:
         train = train & np.asarray(fit_mask, dtype=bool)
-    if int(train.sum()) < 30 or int(holdout.sum()) < 2 * n_chunks:
+    if int(train.sum()) < 30 or int(holdout.sum()) < 2 * n_chunks_local:
         raise ValueError(
             f"too few samples for held-out attribution ({int(train.sum())} training, "
             f"{int(holdout.sum())} held out); provide a longer time span"
