@@ -229,18 +229,14 @@ def _with_learned_crust(
     data unchanged when the model keeps no stage.
     """
     import dataclasses
-    import inspect
 
-    from orbitcal.diagnose.attribution import fit_joint, time_blocks
+    from orbitcal.diagnose.attribution import HOLDOUT_BLOCKS, N_BLOCKS, fit_joint, time_blocks
     from orbitcal.diagnose.learned import learned_field_model
 
-    defaults = inspect.signature(attribute).parameters
     train, holdout, _ = time_blocks(
         data.t_utc_s,
-        n_blocks=int(attribute_options.get("n_blocks", defaults["n_blocks"].default)),
-        holdout_blocks=int(
-            attribute_options.get("holdout_blocks", defaults["holdout_blocks"].default)
-        ),
+        n_blocks=int(attribute_options.get("n_blocks", N_BLOCKS)),
+        holdout_blocks=int(attribute_options.get("holdout_blocks", HOLDOUT_BLOCKS)),
     )
     fit_mask = attribute_options.get("fit_mask")
     if fit_mask is not None:

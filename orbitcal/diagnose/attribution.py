@@ -56,6 +56,11 @@ FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
 
 
+#: Equal-duration time blocks of a diagnosis, and how many of the latest are held out.
+N_BLOCKS = 10
+HOLDOUT_BLOCKS = 3
+
+
 def vector_rms_nt(r_nt: FloatArray) -> float:
     """Root mean square of the vector residual magnitude, ``sqrt(mean |r|^2)`` [nT]."""
     if r_nt.size == 0:
@@ -64,7 +69,7 @@ def vector_rms_nt(r_nt: FloatArray) -> float:
 
 
 def time_blocks(
-    t_utc_s: FloatArray, *, n_blocks: int = 10, holdout_blocks: int = 3
+    t_utc_s: FloatArray, *, n_blocks: int = N_BLOCKS, holdout_blocks: int = HOLDOUT_BLOCKS
 ) -> tuple[BoolArray, BoolArray, npt.NDArray[np.intp]]:
     """Cut the time span into equal-duration blocks; the last ``holdout_blocks`` are held out.
 
@@ -447,8 +452,8 @@ def attribute(
     data: DiagnosisData,
     *,
     candidates: Sequence[Effect] = CATALOGUE,
-    n_blocks: int = 10,
-    holdout_blocks: int = 3,
+    n_blocks: int = N_BLOCKS,
+    holdout_blocks: int = HOLDOUT_BLOCKS,
     n_chunks: int = 32,
     n_chunks_local: int = 16,
     alpha: float = 0.05,
