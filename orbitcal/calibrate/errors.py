@@ -1,10 +1,12 @@
 """Typed errors of the calibrators, split by what the caller can do about them.
 
-All derive from :class:`CalibrationError` (a ``ValueError``), so the CLI turns them into a one-line
-reason and a non-zero exit status (CONTRACT section 2).
+All derive from :class:`CalibrationError` (an :class:`orbitcal.errors.OrbitcalError`), so the CLI
+turns them into a one-line reason and a non-zero exit status (CONTRACT section 2).
 """
 
 from __future__ import annotations
+
+from orbitcal.errors import BadInputError, NotEnoughDataError, OrbitcalError
 
 __all__ = [
     "CalibrationError",
@@ -16,11 +18,11 @@ __all__ = [
 ]
 
 
-class CalibrationError(ValueError):
+class CalibrationError(OrbitcalError):
     """Base class: the input cannot be calibrated as asked."""
 
 
-class TooFewSamplesError(CalibrationError):
+class TooFewSamplesError(CalibrationError, NotEnoughDataError):
     """Fewer valid samples than the method needs; collect more data."""
 
     def __init__(self, method: str, n_samples: int, n_required: int) -> None:
@@ -33,7 +35,7 @@ class TooFewSamplesError(CalibrationError):
         )
 
 
-class MissingAttitudeError(CalibrationError):
+class MissingAttitudeError(CalibrationError, BadInputError):
     """A vector method was asked for but the telemetry carries no attitude quaternions."""
 
     def __init__(self, method: str) -> None:
@@ -45,7 +47,7 @@ class MissingAttitudeError(CalibrationError):
         )
 
 
-class PoorCoverageError(CalibrationError):
+class PoorCoverageError(CalibrationError, NotEnoughDataError):
     """The data leave a direction unobservable; the normal matrix is ill-conditioned."""
 
     def __init__(self, method: str, condition_number: float, limit: float) -> None:
@@ -59,7 +61,7 @@ class PoorCoverageError(CalibrationError):
         )
 
 
-class UnknownMethodError(CalibrationError):
+class UnknownMethodError(CalibrationError, BadInputError):
     """No calibrator is registered under that name."""
 
     def __init__(self, name: str, known: list[str]) -> None:
@@ -68,5 +70,5 @@ class UnknownMethodError(CalibrationError):
         super().__init__(f"unknown calibration method {name!r}; known: {', '.join(known)}")
 
 
-class DocumentError(CalibrationError):
+class DocumentError(CalibrationError, BadInputError):
     """A calibration document (CONTRACT section 4) is malformed or of an unknown method."""
