@@ -31,6 +31,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from orbitcal.errors import BadInputError, LimitExceededError
+
 __all__ = [
     "DEFAULT_APID",
     "PACKET_LENGTH",
@@ -66,7 +68,7 @@ _PACKET_DTYPE = np.dtype(
 assert _PACKET_DTYPE.itemsize == PACKET_LENGTH
 
 
-class PacketError(ValueError):
+class PacketError(BadInputError):
     """A packet stream that cannot be decoded at all (e.g. empty)."""
 
 
@@ -131,7 +133,9 @@ def _ccsdspy_packet() -> object:
     return FixedLength(fields)
 
 
-def _scan(data: bytes, apid: int | None) -> tuple[list[int], list[int], list[tuple[int, str]]]:
+def _scan(
+    data: bytes, apid: int | None, max_packets: int
+) -> tuple[list[int], list[int], list[tuple[int, str]]]:
     """Walk the primary headers: offsets of good packets, their numbers, and rejections."""
     n_full, tail = divmod(len(data), PACKET_LENGTH)
     if n_full and tail == 0:
@@ -145,9 +149,17 @@ def _scan(data: bytes, apid: int | None) -> tuple[list[int], list[int], list[tup
     offsets: list[int] = []
     numbers: list[int] = []
     rejected: list[tuple[int, str]] = []
+    reasons: dict[str, str] = {}  # one string per distinct reason, shared by its packets
     pos = 0
     number = 0
     while pos < len(data):
+        if number >= max_packets:
+            raise LimitExceededError(
+                f"more than {max_packets:,} packets in the stream; the limit max_rows = "
+                f"{max_packets:,}",
+                limit_name="max_rows",
+                limit=max_packets,
+            )
         remaining = len(data) - pos
         if remaining < 6:
             rejected.append((number, f"truncated packet: {remaining} octets, header needs 6"))
@@ -160,14 +172,15 @@ def _scan(data: bytes, apid: int | None) -> tuple[list[int], list[int], list[tup
             )
             break
         this_apid = hdr0 & 0x7FF
+        why = ""
         if (hdr0 >> 13) != 0:
-            rejected.append((number, f"packet version {hdr0 >> 13}, expected 0"))
+            why = f"packet version {hdr0 >> 13}, expected 0"
         elif total != PACKET_LENGTH:
-            rejected.append(
-                (number, f"packet of {total} octets, the magnetometer layout has {PACKET_LENGTH}")
-            )
+            why = f"packet of {total} octets, the magnetometer layout has {PACKET_LENGTH}"
         elif apid is not None and this_apid != apid:
-            rejected.append((number, f"APID {this_apid}, expected {apid}"))
+            why = f"APID {this_apid}, expected {apid}"
+        if why:
+            rejected.append((number, reasons.setdefault(why, why)))
         else:
             offsets.append(pos)
             numbers.append(number)
@@ -176,7 +189,9 @@ def _scan(data: bytes, apid: int | None) -> tuple[list[int], list[int], list[tup
     return offsets, numbers, rejected
 
 
-def decode_packets(data: bytes, *, apid: int | None = None) -> DecodedPackets:
+def decode_packets(
+    data: bytes, *, apid: int | None = None, max_packets: int = 1_000_000
+) -> DecodedPackets:
     """Decode a stream of magnetometer space packets (layout in the module docstring).
 
     Parameters
@@ -185,13 +200,22 @@ def decode_packets(data: bytes, *, apid: int | None = None) -> DecodedPackets:
         Concatenated packets.
     apid : int, optional
         Accept only this APID (others are rejected with a reason); any APID when ``None``.
+    max_packets : int
+        Largest number of packets read (header walks included); more raises
+        :class:`~orbitcal.errors.LimitExceededError` (limit ``max_rows``).
 
     Truncated packets, packets of another length or APID are reported in ``rejected`` by their
     0-based packet number; the valid ones are decoded.
     """
     if not data:
         raise PacketError("no packets: the body is empty")
-    offsets, numbers, rejected = _scan(data, apid)
+    if len(data) // PACKET_LENGTH > max_packets:
+        raise LimitExceededError(
+            f"{len(data) // PACKET_LENGTH:,} packets exceed the limit max_rows = {max_packets:,}",
+            limit_name="max_rows",
+            limit=max_packets,
+        )
+    offsets, numbers, rejected = _scan(data, apid, max_packets)
     n = len(offsets)
     if n == 0:
         empty = np.zeros(0)
@@ -221,16 +245,41 @@ def decode_packets(data: bytes, *, apid: int | None = None) -> DecodedPackets:
     def stack(*names: str) -> np.ndarray:
         return np.stack([np.asarray(cols[c], dtype=np.float64) for c in names], axis=-1)
 
+    # A CUC time before 1972 has no UTC (no leap-second offset defined): e.g. a zeroed time field
+    # (1958-01-01 TAI). A TAI instant inside a leap second has no POSIX UTC time of its own (it
+    # would merge with the next second). Both are rejected with the reason, never decoded as NaN.
+    t_tai_unix = t_tai_1958 - TAI_1958_TO_UNIX_S
+    no_utc = ~np.isfinite(t_utc)
+    back = _utc_s_to_tai_unix(np.where(no_utc, 0.0, t_utc))
+    in_leap = ~no_utc & (np.abs(back - t_tai_unix) > 1e-6)
+    keep = ~(no_utc | in_leap)
+    numbers_arr = np.asarray(numbers, dtype=int)
+    if not keep.all():
+        for k in np.flatnonzero(~keep).tolist():
+            coarse_k = int(coarse[k])
+            if no_utc[k]:
+                why = (
+                    f"CUC time {coarse_k} s + {int(fine[k])}/2^24 after 1958-01-01 TAI is before "
+                    "1972-01-01, where UTC is not defined by leap seconds (a zeroed time field?)"
+                )
+            else:
+                why = (
+                    f"CUC time {coarse_k} s after 1958-01-01 TAI falls in a leap second "
+                    "(23:59:60 UTC), which UTC seconds since 1970 cannot hold apart from the next "
+                    "second"
+                )
+            rejected.append((int(numbers_arr[k]), why))
+        rejected.sort()
     return DecodedPackets(
-        index=np.asarray(numbers, dtype=int),
-        apid=np.asarray(cols["CCSDS_APID"], dtype=int),
-        sequence_count=np.asarray(cols["CCSDS_SEQUENCE_COUNT"], dtype=int),
-        t_tai_1958_s=t_tai_1958,
-        t_utc_s=t_utc,
-        b_raw_nt=stack("b_x", "b_y", "b_z"),
-        q_wxyz=stack("q_w", "q_x", "q_y", "q_z"),
-        temperature_c=np.asarray(cols["temperature"], dtype=np.float64),
-        mtq_am2=stack("mtq_x", "mtq_y", "mtq_z"),
+        index=numbers_arr[keep],
+        apid=np.asarray(cols["CCSDS_APID"], dtype=int)[keep],
+        sequence_count=np.asarray(cols["CCSDS_SEQUENCE_COUNT"], dtype=int)[keep],
+        t_tai_1958_s=t_tai_1958[keep],
+        t_utc_s=t_utc[keep],
+        b_raw_nt=stack("b_x", "b_y", "b_z")[keep],
+        q_wxyz=stack("q_w", "q_x", "q_y", "q_z")[keep],
+        temperature_c=np.asarray(cols["temperature"], dtype=np.float64)[keep],
+        mtq_am2=stack("mtq_x", "mtq_y", "mtq_z")[keep],
         rejected=rejected,
     )
 

@@ -41,7 +41,9 @@ built for valid CSV or Parquet data.
 
 from __future__ import annotations
 
+import csv
 import io
+import json
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -55,16 +57,24 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.csv as pa_csv
-import pyarrow.json as pa_json
 import pyarrow.parquet as pq
 
-from orbitcal.timescales import TIME_SCALES, TimeScaleError, parse_time_values, to_utc_s
+from orbitcal.errors import BadInputError, LimitExceededError
+from orbitcal.timescales import (
+    TIME_SCALES,
+    TimeScaleError,
+    from_utc_s,
+    parse_time_values,
+    to_utc_s,
+)
 
 __all__ = [
     "B_ABSURD_NT",
+    "DEFAULT_LIMITS",
     "OPTIONAL_GROUPS",
     "QUAT_NORM_TOL",
     "REQUIRED_COLUMNS",
+    "ParseLimits",
     "ReadResult",
     "RowError",
     "Telemetry",
@@ -72,6 +82,7 @@ __all__ = [
     "TelemetryFormat",
     "format_from_path",
     "from_frame",
+    "json_scan",
     "parse_telemetry",
     "read_telemetry",
     "write_field_csv",
@@ -102,6 +113,144 @@ T_MIN_S = -2_208_988_800.0
 T_MAX_S = 7_258_118_400.0
 HK_PREFIX = "hk_"
 
+
+@dataclass(frozen=True)
+class ParseLimits:
+    """Size limits every reader enforces before a native parser (orjson, pyarrow, pandas) runs.
+
+    A table beyond a limit raises :class:`~orbitcal.errors.LimitExceededError` (HTTP 413) naming
+    the limit; the limits are documented in ``docs/reliability.md``. Bytes are bounded before
+    this point (the service's body limit applies to the *decompressed* body).
+
+    Attributes
+    ----------
+    max_rows : int
+        Data rows (CSV lines, NDJSON lines, JSON elements, Parquet rows from the file's metadata,
+        CCSDS packets).
+    max_columns : int
+        Columns of a table (contract columns plus ``hk_*`` channels and ignored ones).
+    max_cells : int
+        Rows × columns after expansion (Parquet from its metadata; JSON: values in the body).
+    max_json_depth : int
+        Nesting depth of ``[`` / ``{`` in JSON and in each NDJSON line (a record is depth 1).
+    max_name_chars : int
+        Length of a column name [characters].
+    max_string_chars : int
+        Length of one text cell (times, text housekeeping) [characters].
+    max_decoded_bytes : int
+        Parquet: uncompressed size of the column data, from the file's metadata [bytes].
+    """
+
+    max_rows: int = 1_000_000
+    max_columns: int = 256
+    max_cells: int = 16_000_000
+    max_json_depth: int = 8
+    max_name_chars: int = 128
+    max_string_chars: int = 4096
+    max_decoded_bytes: int = 512 * 2**20
+
+
+#: The limits the readers and the service use unless told otherwise.
+DEFAULT_LIMITS = ParseLimits()
+
+
+def _limit(what: str, value: int | float, name: str, limit: int | float) -> LimitExceededError:
+    return LimitExceededError(
+        f"{what} ({value:,}) exceeds the limit {name} = {limit:,}", limit_name=name, limit=limit
+    )
+
+
+_SCAN_CHUNK = 1 << 20
+#: Bytes the JSON scan looks at: " \\ [ { ] } line ends (LF, CR), comma and colon.
+_SCAN_EVENTS = np.zeros(256, dtype=bool)
+_SCAN_EVENTS[[34, 92, 91, 123, 93, 125, 10, 13, 44, 58]] = True
+
+
+def json_scan(data: bytes, *, per_line: bool) -> tuple[int, int, int, int]:
+    """Structure of a JSON (or NDJSON) body without parsing it.
+
+    Returns ``(max_depth, at_byte, commas, colons)``.
+
+    A vectorised pass over the raw bytes (1 MiB at a time, only the structural bytes kept):
+    quotes not escaped by an odd run of backslashes toggle "inside a string" (reset at each
+    line end, LF or CR, where no valid JSON string can continue); ``[``/``{`` and ``]``/``}``
+    outside strings move the depth. For NDJSON (``per_line``) the depth counts from each line's
+    start. Up to the first syntax error a parser would stop at, this is the parser's own view,
+    so a body that passes a depth check here cannot drive a parser deeper. ``commas`` (outside
+    strings) bounds the number of values; ``colons`` (outside strings) is the number of object
+    keys, so a parser that keeps fewer keys dropped a repeated one.
+    """
+    a_all = np.frombuffer(data, dtype=np.uint8)
+    depth = 0  # depth at the end of the previous chunk
+    line_base = 0  # depth at the start of the current line (NDJSON)
+    quotes_open = 0  # 1 when the previous chunk ended inside a string
+    bs_run = 0  # backslashes ending the previous chunk
+    best, best_at, commas, colons = 0, 0, 0, 0
+    for start in range(0, a_all.size, _SCAN_CHUNK):
+        chunk = a_all[start : start + _SCAN_CHUNK]
+        pos = np.flatnonzero(_SCAN_EVENTS[chunk])
+        if pos.size == 0:
+            bs_run = 0
+            continue
+        c = chunk[pos]
+        e = np.arange(pos.size)
+        is_bs = c == 92
+        escaped = np.zeros(pos.size, dtype=bool)
+        if bs_run or is_bs.any():
+            adj = np.empty(pos.size, dtype=bool)
+            adj[0] = pos[0] == 0
+            adj[1:] = np.diff(pos) == 1
+            prev_bs = np.empty(pos.size, dtype=bool)
+            prev_bs[0] = bs_run > 0
+            prev_bs[1:] = is_bs[:-1]
+            cont = is_bs & prev_bs & adj
+            run_start = np.maximum.accumulate(np.where(is_bs & ~cont, e, -1))
+            run = np.where(is_bs, np.where(run_start >= 0, e - run_start + 1, e + 1 + bs_run), 0)
+            prev_run = np.empty(pos.size, dtype=np.int64)
+            prev_run[0] = bs_run
+            prev_run[1:] = run[:-1]
+            escaped = prev_bs & adj & (prev_run % 2 == 1)
+            bs_run = int(run[-1]) if is_bs[-1] and pos[-1] == chunk.size - 1 else 0
+        else:
+            bs_run = 0
+        quote = (c == 34) & ~escaped
+        line_start = np.maximum.accumulate(np.where((c == 10) | (c == 13), e, -1))
+        has_start = line_start >= 0
+        ls = np.maximum(line_start, 0)
+        qcum = np.cumsum(quote, dtype=np.int64) + quotes_open
+        qbase = np.where(has_start, qcum[ls], 0)
+        outside = ((qcum - qbase) & 1) == 0
+        step = ((c == 91) | (c == 123)).astype(np.int64) - ((c == 93) | (c == 125))
+        d = np.cumsum(np.where(outside, step, 0)) + depth
+        rel = d - np.where(has_start, d[ls], line_base) if per_line else d
+        k = int(np.argmax(rel))
+        if int(rel[k]) > best:
+            best, best_at = int(rel[k]), start + int(pos[k])
+        commas += int(np.count_nonzero((c == 44) & outside))
+        colons += int(np.count_nonzero((c == 58) & outside))
+        depth = int(d[-1])
+        if per_line and has_start[-1]:
+            line_base = int(d[ls[-1]])
+        quotes_open = int((qcum[-1] - qbase[-1]) & 1)
+    return best, best_at, commas, colons
+
+
+def _check_json_structure(data: bytes, *, per_line: bool, limits: ParseLimits) -> tuple[int, int]:
+    """Depth and value count of a JSON body within the limits; returns (keys, max depth)."""
+    depth, at, commas, colons = json_scan(data, per_line=per_line)
+    if depth > limits.max_json_depth:
+        line = data.count(b"\n", 0, at)
+        raise LimitExceededError(
+            f"JSON nested {depth:,} deep at line {line + 1} (byte {at}) exceeds the limit "
+            f"max_json_depth = {limits.max_json_depth} (a sample is one flat object)",
+            limit_name="max_json_depth",
+            limit=limits.max_json_depth,
+        )
+    if commas + 1 > limits.max_cells:
+        raise _limit("values in the JSON body", commas + 1, "max_cells", limits.max_cells)
+    return colons, depth
+
+
 _EXTENSIONS: dict[str, TelemetryFormat] = {
     ".csv": "csv",
     ".parquet": "parquet",
@@ -113,7 +262,7 @@ _EXTENSIONS: dict[str, TelemetryFormat] = {
 _KNOWN_COLUMNS = frozenset(REQUIRED_COLUMNS).union(*OPTIONAL_GROUPS.values())
 
 
-class TelemetryError(ValueError):
+class TelemetryError(BadInputError):
     """The table as a whole cannot be read (missing column, bad format, unknown time scale).
 
     Fix the file or the option named in the message; row-level problems never raise, they are
@@ -307,7 +456,13 @@ def read_telemetry(path: str | Path, *, time_scale: str = "UTC") -> ReadResult:
         raise TelemetryError(f"{path}: {exc}") from None
 
 
-def parse_telemetry(data: bytes, *, fmt: TelemetryFormat, time_scale: str = "UTC") -> ReadResult:
+def parse_telemetry(
+    data: bytes,
+    *,
+    fmt: TelemetryFormat,
+    time_scale: str = "UTC",
+    limits: ParseLimits = DEFAULT_LIMITS,
+) -> ReadResult:
     """Parse and validate a telemetry table held in memory (e.g. an HTTP upload body).
 
     Parameters
@@ -318,6 +473,9 @@ def parse_telemetry(data: bytes, *, fmt: TelemetryFormat, time_scale: str = "UTC
         Its format.
     time_scale : {"UTC", "TAI", "GPS"}
         The scale the times are read in.
+    limits : ParseLimits
+        Rows, columns, cells, nesting depth and text lengths, checked before any native parser
+        sees the data.
 
     Returns
     -------
@@ -326,28 +484,29 @@ def parse_telemetry(data: bytes, *, fmt: TelemetryFormat, time_scale: str = "UTC
     Raises
     ------
     TelemetryError
-        Unreadable encoding, missing required column, unknown format or time scale.
+        Unreadable encoding, missing or repeated column, unknown format or time scale.
+    LimitExceededError
+        A limit of ``limits`` was exceeded (the message names it).
     """
     _check_time_scale(time_scale)
     pre_errors: dict[int, str] = {}
     if fmt == "csv":
-        df, pre_errors = _read_csv_bytes(data)
+        df, pre_errors = _read_csv_bytes(data, limits)
     elif fmt == "parquet":
-        try:
-            table = pq.read_table(pa.BufferReader(data))
-        except (pa.ArrowException, OSError) as exc:
-            raise TelemetryError(f"not a readable Parquet file: {exc}") from None
-        df = table.to_pandas()
+        df = _read_parquet_bytes(data, limits)
     elif fmt == "ndjson":
-        df, pre_errors = _read_ndjson_bytes(data)
+        df, pre_errors = _read_ndjson_bytes(data, limits)
     elif fmt == "json":
-        df = _read_json_array_bytes(data)
+        df, pre_errors = _read_json_array_bytes(data, limits)
     else:
         raise TelemetryError(f"unknown telemetry format {fmt!r}; use csv, ndjson, json or parquet")
+    _check_frame(df, limits)
     return _validate(df, time_scale=time_scale, pre_errors=pre_errors)
 
 
-def from_frame(df: pd.DataFrame, *, time_scale: str = "UTC") -> ReadResult:
+def from_frame(
+    df: pd.DataFrame, *, time_scale: str = "UTC", limits: ParseLimits = DEFAULT_LIMITS
+) -> ReadResult:
     """Validate a pandas table with the contract's columns (rows in upload order).
 
     Parameters
@@ -356,13 +515,19 @@ def from_frame(df: pd.DataFrame, *, time_scale: str = "UTC") -> ReadResult:
         Columns as in CONTRACT section 1; ``time`` may be strings, numbers or datetimes.
     time_scale : {"UTC", "TAI", "GPS"}
         The scale the times are read in.
+    limits : ParseLimits
+        Rows, columns and text lengths.
 
     Returns
     -------
     ReadResult
     """
     _check_time_scale(time_scale)
-    return _validate(df.reset_index(drop=True), time_scale=time_scale, pre_errors={})
+    df = df.reset_index(drop=True)
+    _check_names([str(c) for c in df.columns], limits)
+    _check_shape(len(df), len(df.columns), limits)
+    _check_frame(df, limits)
+    return _validate(df, time_scale=time_scale, pre_errors={})
 
 
 def _check_time_scale(time_scale: str) -> None:
@@ -371,6 +536,84 @@ def _check_time_scale(time_scale: str) -> None:
             f"unknown time scale {time_scale!r}: use one of {', '.join(TIME_SCALES)} "
             "(--time-scale / ?time_scale=)"
         )
+
+
+def _check_shape(n_rows: int, n_columns: int, limits: ParseLimits) -> None:
+    if n_columns > limits.max_columns:
+        raise _limit("columns", n_columns, "max_columns", limits.max_columns)
+    if n_rows > limits.max_rows:
+        raise _limit("rows", n_rows, "max_rows", limits.max_rows)
+    if n_rows * n_columns > limits.max_cells:
+        raise _limit(
+            f"cells ({n_rows:,} rows × {n_columns:,} columns)",
+            n_rows * n_columns,
+            "max_cells",
+            limits.max_cells,
+        )
+
+
+def _check_names(names: Sequence[str], limits: ParseLimits) -> None:
+    """Column names: within the count and length limits, none repeated (after trimming)."""
+    if len(names) > limits.max_columns:
+        raise _limit("columns", len(names), "max_columns", limits.max_columns)
+    seen: dict[str, int] = {}
+    for j, raw in enumerate(names):
+        name = raw.strip()
+        if len(name) > limits.max_name_chars:
+            raise LimitExceededError(
+                f"column {j + 1} has a name of {len(name):,} characters, over the limit "
+                f"max_name_chars = {limits.max_name_chars}",
+                limit_name="max_name_chars",
+                limit=limits.max_name_chars,
+            )
+        if name in seen:
+            raise TelemetryError(
+                f"repeated column name {name!r} (columns {seen[name] + 1} and {j + 1}): "
+                "each column may appear once",
+                field=name,
+            )
+        seen[name] = j
+
+
+def _check_frame(df: pd.DataFrame, limits: ParseLimits) -> None:
+    """Names unique and text cells within ``max_string_chars`` (counts are checked before)."""
+    _check_names([str(c) for c in df.columns], limits)
+    for c in df.columns:
+        col = df[c]
+        if col.dtype.kind != "O" and not pd.api.types.is_string_dtype(col.dtype):
+            continue
+        if pd.api.types.infer_dtype(col, skipna=True) in ("string", "empty"):
+            try:  # vectorised: the longest text of a plain string column
+                longest = pc.max(pc.utf8_length(pa.array(col, from_pandas=True))).as_py()
+                if longest is None or longest <= limits.max_string_chars:
+                    continue
+            except (pa.ArrowException, TypeError, ValueError):
+                pass
+        lengths = col.map(lambda v: len(v) if isinstance(v, str | bytes) else 0)
+        too_long = np.flatnonzero(lengths.to_numpy(dtype=np.int64) > limits.max_string_chars)
+        if too_long.size:
+            row = int(too_long[0])
+            raise LimitExceededError(
+                f"row {row}: {str(c).strip()} holds {int(lengths.iloc[row]):,} characters, over "
+                f"the limit max_string_chars = {limits.max_string_chars}",
+                limit_name="max_string_chars",
+                limit=limits.max_string_chars,
+            )
+
+
+def _check_utf8(data: bytes, *, what: str, header_lines: int = 1) -> None:
+    """Refuse text that is not UTF-8, naming the data row (0-based) and the byte."""
+    try:
+        data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start)
+        row = line - header_lines
+        where = "the header" if row < 0 else f"row {row}"
+        raise TelemetryError(
+            f"not a readable {what} table: {where} is not UTF-8 text (byte "
+            f"0x{data[exc.start]:02x} at offset {exc.start}: {exc.reason})",
+            row=None if row < 0 else row,
+        ) from None
 
 
 def _read_csv_arrow(data: bytes, *, use_threads: bool, invalid: list[Any]) -> pa.Table:
@@ -388,12 +631,37 @@ def _read_csv_arrow(data: bytes, *, use_threads: bool, invalid: list[Any]) -> pa
     )
 
 
-def _read_csv_bytes(data: bytes) -> tuple[pd.DataFrame, dict[int, str]]:
+def _csv_header(data: bytes, limits: ParseLimits) -> list[str]:
+    """The CSV header's column names, read in Python within the limits (before pyarrow/pandas)."""
+    ends = [i for i in (data.find(b"\n"), data.find(b"\r")) if i >= 0]
+    line = data[: min(ends)] if ends else data
+    cap = limits.max_columns * (limits.max_name_chars + 3) + 64
+    if len(line) > cap:
+        n = line.count(b",") + 1
+        if n > limits.max_columns:
+            raise _limit("columns in the CSV header", n, "max_columns", limits.max_columns)
+        raise _limit("bytes in the CSV header", len(line), "max_name_chars", limits.max_name_chars)
+    _check_utf8(line, what="CSV")
+    try:
+        names = next(csv.reader([line.decode("utf-8")], skipinitialspace=True), [])
+    except csv.Error as exc:
+        raise TelemetryError(f"not a readable CSV table: the header: {exc}") from None
+    _check_names(names, limits)
+    return names
+
+
+def _read_csv_bytes(data: bytes, limits: ParseLimits) -> tuple[pd.DataFrame, dict[int, str]]:
     """CSV → frame in data-row order plus reasons for rows with the wrong number of fields."""
     if not data.strip():
         raise TelemetryError("empty CSV: a header row with at least time,b_x,b_y,b_z is required")
     if data.startswith(b"\xef\xbb\xbf"):
         data = data[3:]  # UTF-8 byte-order mark (spreadsheet exports)
+    names = _csv_header(data, limits)
+    # Line ends as pyarrow and pandas see them: LF, CR LF or a lone CR.
+    n_breaks = data.count(b"\n") + data.count(b"\r") - data.count(b"\r\n")
+    n_lines = n_breaks + (not data.endswith((b"\n", b"\r")))
+    _check_shape(max(n_lines - 1, 0), len(names), limits)
+    _check_utf8(data, what="CSV")
     invalid: list[Any] = []
     try:
         # Multi-threaded columnar reader; times kept as text, numbers inferred per column.
@@ -423,81 +691,302 @@ def _read_csv_bytes(data: bytes) -> tuple[pd.DataFrame, dict[int, str]]:
     return df.reindex(pd.RangeIndex(total)), bad
 
 
-def _records_to_frame(records: Sequence[Any]) -> pd.DataFrame:
-    bad = [i for i, r in enumerate(records) if not isinstance(r, dict)]
-    if bad:
-        raise TelemetryError(f"row {bad[0]}: a JSON object per sample is required")
-    return pd.DataFrame.from_records(records)
+def _parquet_type_ok(t: pa.DataType) -> bool:
+    if pa.types.is_dictionary(t):
+        return _parquet_type_ok(t.value_type)
+    return bool(
+        pa.types.is_integer(t)
+        or pa.types.is_floating(t)
+        or pa.types.is_boolean(t)
+        or pa.types.is_string(t)
+        or pa.types.is_large_string(t)
+        or pa.types.is_timestamp(t)
+        or pa.types.is_decimal(t)
+        or pa.types.is_null(t)
+    )
 
 
-def _read_json_array_bytes(data: bytes) -> pd.DataFrame:
+def _read_parquet_bytes(data: bytes, limits: ParseLimits) -> pd.DataFrame:
+    """Parquet → frame, after its metadata (rows, columns, types, sizes) passed the limits."""
+    try:
+        pf = pq.ParquetFile(pa.BufferReader(data))
+        meta = pf.metadata
+        schema = pf.schema_arrow
+    except (pa.ArrowException, OSError, ValueError) as exc:
+        raise TelemetryError(f"not a readable Parquet file: {exc}") from None
+    names = [str(n) for n in schema.names]
+    _check_names(names, limits)
+    if meta.num_columns > limits.max_columns:
+        raise _limit("Parquet leaf columns", meta.num_columns, "max_columns", limits.max_columns)
+    _check_shape(int(meta.num_rows), len(names), limits)
+    for f in schema:
+        if not _parquet_type_ok(f.type):
+            raise TelemetryError(
+                f"column {f.name!r} has Parquet type {f.type}: the table needs flat columns of "
+                "numbers, booleans, UTF-8 strings or timestamps",
+                field=str(f.name),
+            )
+    if meta.num_row_groups > limits.max_rows:
+        raise _limit("Parquet row groups", meta.num_row_groups, "max_rows", limits.max_rows)
+    decoded = 0
+    for i in range(meta.num_row_groups):
+        group = meta.row_group(i)
+        decoded += sum(
+            max(int(group.column(j).total_uncompressed_size), 0) for j in range(group.num_columns)
+        )
+        if decoded > limits.max_decoded_bytes:
+            raise _limit(
+                "uncompressed Parquet bytes", decoded, "max_decoded_bytes", limits.max_decoded_bytes
+            )
+    try:
+        table = pf.read()
+    except (pa.ArrowException, OSError, ValueError) as exc:
+        raise TelemetryError(f"not a readable Parquet file: {exc}") from None
+    if table.num_rows != meta.num_rows:
+        raise TelemetryError(
+            f"Parquet file holds {table.num_rows} rows but its metadata says {meta.num_rows}"
+        )
+    for name, col in zip(names, table.columns, strict=True):
+        t = col.type.value_type if pa.types.is_dictionary(col.type) else col.type
+        if pa.types.is_string(t) or pa.types.is_large_string(t):
+            _check_parquet_utf8(name, col)
+    try:
+        return table.to_pandas()
+    except (pa.ArrowException, ValueError, UnicodeDecodeError) as exc:
+        raise TelemetryError(f"Parquet file cannot be converted to a table: {exc}") from None
+
+
+def _check_parquet_utf8(name: str, col: pa.ChunkedArray) -> None:
+    try:
+        col.validate(full=True)
+        return
+    except pa.ArrowInvalid:
+        pass
+    values = col.cast(pa.binary()) if not pa.types.is_dictionary(col.type) else None
+    row = 0
+    if values is not None:
+        for i, v in enumerate(values.to_pylist()):
+            if v is not None:
+                try:
+                    v.decode("utf-8")
+                except UnicodeDecodeError:
+                    row = i
+                    break
+    raise TelemetryError(
+        f"row {row}: column {name!r} holds text that is not UTF-8", row=row, field=name
+    )
+
+
+def _n_keys(value: Any) -> int:
+    if isinstance(value, dict):
+        return len(value) + sum(_n_keys(v) for v in value.values())
+    if isinstance(value, list):
+        return sum(_n_keys(v) for v in value)
+    return 0
+
+
+def _records_to_frame(
+    records: list[Any], pre: dict[int, str], limits: ParseLimits
+) -> tuple[pd.DataFrame, dict[int, str]]:
+    for i, r in enumerate(records):
+        if not isinstance(r, dict):
+            records[i] = {}
+            pre.setdefault(i, "not a JSON object (one object per sample is required)")
+    if len(records) > limits.max_rows:
+        raise _limit("rows", len(records), "max_rows", limits.max_rows)
+    keys: dict[str, None] = {}
+    for r in records:
+        keys.update(dict.fromkeys(r))
+        if len(keys) > limits.max_columns:
+            raise _limit("distinct keys", len(keys), "max_columns", limits.max_columns)
+    _check_names(list(keys), limits)
+    _check_shape(len(records), len(keys), limits)
+    return pd.DataFrame.from_records(records, columns=list(keys)), pre
+
+
+def _read_json_array_bytes(data: bytes, limits: ParseLimits) -> tuple[pd.DataFrame, dict[int, str]]:
+    colons, depth = _check_json_structure(data, per_line=False, limits=limits)
     try:
         parsed = orjson.loads(data)
     except orjson.JSONDecodeError as exc:
         raise TelemetryError(f"not readable JSON: {exc}") from None
+    if isinstance(parsed, list) and depth <= 2:  # flat objects in an array: count in C
+        n_keys = sum(map(len, (r for r in parsed if isinstance(r, dict))))
+    else:
+        n_keys = _n_keys(parsed)
+    if n_keys != colons:
+        # orjson keeps the last of repeated keys; name the object that repeats one.
+        if isinstance(parsed, list):
+            pre: dict[int, str] = {}
+            # orjson merged them: re-read with Python's parser, which keeps every key.
+            items = _loads_pairs(data) or []
+            for i, r in enumerate(items):
+                dup = _first_repeat(r)
+                if dup is not None:
+                    pre[i] = f"repeated key {dup!r} in this object"
+            if not pre:
+                raise TelemetryError("repeated key in a nested JSON value")
+            return _records_to_frame(parsed, pre, limits)
+        raise TelemetryError("repeated key in the JSON object: each column may appear once")
     if isinstance(parsed, dict) and all(isinstance(v, list) for v in parsed.values()):
         # Column-oriented JSON ({"time": [...], "b_x": [...]}) is accepted too.
-        try:
-            return pd.DataFrame(parsed)
-        except ValueError as exc:
-            raise TelemetryError(f"JSON columns of unequal length: {exc}") from None
+        _check_names(list(parsed), limits)
+        lengths = {len(v) for v in parsed.values()}
+        if len(lengths) > 1:
+            raise TelemetryError(
+                f"JSON columns of unequal length ({', '.join(map(str, sorted(lengths)))})"
+            )
+        _check_shape(lengths.pop() if lengths else 0, len(parsed), limits)
+        return pd.DataFrame(parsed), {}
     if not isinstance(parsed, list):
         raise TelemetryError("JSON telemetry must be an array of objects, one per sample")
-    return _records_to_frame(parsed)
+    return _records_to_frame(parsed, {}, limits)
 
 
-def _read_ndjson_bytes(data: bytes) -> tuple[pd.DataFrame, dict[int, str]]:
-    try:
-        # Columnar C++ reader for clean files (multi-threaded, no per-row Python objects).
-        # pyarrow 26's reader kills the process (SIGSEGV) when the first value is not an object
-        # (e.g. a body starting with ``null``), so it only sees bodies that start with ``{``.
-        head = data[3:] if data.startswith(b"\xef\xbb\xbf") else data
-        if not head.lstrip(b" \t\r\n").startswith(b"{"):
-            raise ValueError("not an object first: parse line by line")
-        table = pa_json.read_json(io.BytesIO(data))
-        if table.num_rows and all(
-            not pa.types.is_nested(f.type) and not pa.types.is_null(f.type) for f in table.schema
-        ):
-            return table.to_pandas(), {}
-    except (pa.ArrowException, ValueError):
-        pass
+def _pairs(pairs: list[tuple[str, Any]]) -> Any:
+    return _PairList(pairs)
+
+
+class _PairList(list):  # type: ignore[type-arg]
+    """An object read with every key kept (to find repeated ones)."""
+
+
+def _first_repeat(value: Any) -> str | None:
+    if isinstance(value, _PairList):
+        seen: set[str] = set()
+        for k, v in value:
+            if k in seen:
+                return str(k)
+            seen.add(k)
+            inner = _first_repeat(v)
+            if inner is not None:
+                return inner
+    elif isinstance(value, list):
+        for v in value:
+            inner = _first_repeat(v)
+            if inner is not None:
+                return inner
+    return None
+
+
+_NDJSON_CHUNK_LINES = 65_536
+
+
+def _read_ndjson_bytes(data: bytes, limits: ParseLimits) -> tuple[pd.DataFrame, dict[int, str]]:
+    """NDJSON → frame: each non-blank line is exactly one JSON document, i.e. one row.
+
+    Lines become Python objects a chunk at a time (65,536 lines), each chunk a frame at once, so
+    a large body never holds all its rows as dicts together.
+    """
+    if data.startswith(b"\xef\xbb\xbf"):
+        data = data[3:]
+    colons, depth = _check_json_structure(data, per_line=True, limits=limits)
     lines = [ln for ln in data.splitlines() if ln.strip()]
-    try:
-        # One C-level parse of the whole body when every line is valid (the common case).
-        records: list[Any] = orjson.loads(b"[" + b",".join(lines) + b"]")
-        pre: dict[int, str] = {}
-    except orjson.JSONDecodeError:
-        records = []
-        pre = {}
-        for i, ln in enumerate(lines):
-            try:
-                records.append(orjson.loads(ln))
-            except orjson.JSONDecodeError as exc:
-                records.append({})
-                pre[i] = f"line is not valid JSON ({exc})"
-    for i, r in enumerate(records):
-        if not isinstance(r, dict):
-            records[i] = {}
-            pre[i] = "line is not a JSON object"
-    if not records:
+    if not lines:
         raise TelemetryError("empty NDJSON: one JSON object per sample is required")
-    return pd.DataFrame.from_records(records), pre
+    if len(lines) > limits.max_rows:
+        raise _limit("rows", len(lines), "max_rows", limits.max_rows)
+    pre: dict[int, str] = {}
+    keys: set[str] = set()
+    n_keys = 0
+    frames: list[pd.DataFrame] = []
+    loads = orjson.loads
+    for start in range(0, len(lines), _NDJSON_CHUNK_LINES):
+        chunk = lines[start : start + _NDJSON_CHUNK_LINES]
+        try:  # the common case: every line is one valid document (one C call per line)
+            records: list[Any] = list(map(loads, chunk))
+        except orjson.JSONDecodeError:
+            records = []
+            for i, ln in enumerate(chunk, start):
+                try:
+                    records.append(loads(ln))
+                except orjson.JSONDecodeError as exc:
+                    records.append({})
+                    pre[i] = f"line is not valid JSON ({exc})"
+        if not all(type(r) is dict for r in records):
+            for i, r in enumerate(records):
+                if not isinstance(r, dict):
+                    records[i] = {}
+                    pre[start + i] = "not a JSON object (one object per sample is required)"
+        keys.update(*records)
+        if len(keys) > limits.max_columns:
+            raise _limit("distinct keys", len(keys), "max_columns", limits.max_columns)
+        _check_names(sorted(keys), limits)
+        _check_shape(len(lines), len(keys), limits)
+        n_keys += sum(map(len, records)) if depth <= 1 else sum(map(_n_keys, records))
+        frame = pd.DataFrame.from_records(records)
+        if len(frame) != len(records):  # no key at all: keep one (empty) row per line
+            frame = pd.DataFrame(index=pd.RangeIndex(len(records)))
+        frames.append(frame)
+    if n_keys != colons:
+        # orjson keeps the last of repeated keys: find the lines that repeat one.
+        for i, ln in enumerate(lines):
+            if i not in pre:
+                dup = _first_repeat(_loads_pairs(ln))
+                if dup is not None:
+                    pre[i] = f"repeated key {dup!r} in this object"
+    df = frames[0] if len(frames) == 1 else pd.concat(frames, ignore_index=True)
+    return df, pre
+
+
+def _loads_pairs(text: bytes) -> Any:
+    try:
+        return json.loads(text, object_pairs_hook=_pairs)
+    except (ValueError, RecursionError):
+        return None
 
 
 # --- validation ----------------------------------------------------------------------------------
 
 
-def _numeric_column(series: pd.Series) -> tuple[FloatArray, npt.NDArray[np.bool_]]:
-    """Column → float64 and a mask of entries that were present but not numbers."""
+def _numeric_column(
+    series: pd.Series,
+) -> tuple[FloatArray, npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
+    """Column → float64, a mask of entries present but not numbers, and a mask of booleans.
+
+    Booleans (``true``/``false`` in CSV or JSON) are not numbers: they are masked as such, never
+    read as 1 and 0.
+    """
+    n = len(series)
     if series.dtype.kind in "iuf":
-        return series.to_numpy(dtype=np.float64, na_value=np.nan), np.zeros(len(series), bool)
+        values = series.to_numpy(dtype=np.float64, na_value=np.nan)
+        return values, np.zeros(n, bool), np.zeros(n, bool)
     if series.dtype.kind == "b":
-        return series.to_numpy(dtype=np.float64), np.zeros(len(series), bool)
+        return np.full(n, np.nan), np.ones(n, bool), np.ones(n, bool)
+    is_bool = np.zeros(n, bool)
+    kind = pd.api.types.infer_dtype(series, skipna=True) if series.dtype.kind == "O" else ""
+    if str(series.dtype) == "boolean" or kind not in ("", "string", "empty", "floating", "integer"):
+        is_bool = series.map(lambda v: isinstance(v, bool | np.bool_)).to_numpy(dtype=bool)
+        if is_bool.any():
+            series = series.where(~is_bool, None)
     as_num = pd.to_numeric(series, errors="coerce")
     values = as_num.to_numpy(dtype=np.float64, na_value=np.nan)
-    not_number = np.asarray(series.notna().to_numpy(dtype=bool) & np.isnan(values))
     # Literal "nan"/"inf" strings are numbers, but non-finite: treat as non-finite, not as text.
-    return values, not_number
+    not_number = np.asarray(series.notna().to_numpy(dtype=bool) & np.isnan(values)) | is_bool
+    return values, not_number, is_bool
+
+
+#: A ``23:59:60`` leap second in an ISO-8601 time.
+_LEAP_SECOND = r"[Tt ]\d\d:\d\d:60(?:[.,]\d*)?\s*(?:[Zz]|[+-]\d\d:?\d\d)?\s*$"
+
+
+def _leap_second_rows(series: pd.Series) -> npt.NDArray[np.bool_]:
+    """Rows whose time is written as a ``23:59:60`` leap second."""
+    if series.dtype.kind in "iufMb":
+        return np.zeros(len(series), bool)
+    try:
+        arr = pa.array(series, from_pandas=True)
+        if pa.types.is_string(arr.type) or pa.types.is_large_string(arr.type):
+            if not pc.any(pc.match_substring(arr, ":60")).as_py():
+                return np.zeros(len(series), bool)
+            hit = pc.match_substring_regex(arr, _LEAP_SECOND)
+            return np.asarray(hit.to_numpy(zero_copy_only=False), dtype=bool) & ~np.asarray(
+                pc.is_null(hit).to_numpy(zero_copy_only=False), dtype=bool
+            )
+    except (pa.ArrowException, TypeError, ValueError):
+        pass
+    text = series.map(lambda v: v if isinstance(v, str) else "")
+    return np.asarray(text.str.contains(_LEAP_SECOND, regex=True).to_numpy(dtype=bool))
 
 
 def _parse_times(series: pd.Series) -> tuple[FloatArray, dict[int, str]]:
@@ -570,6 +1059,15 @@ def _validate(df: pd.DataFrame, *, time_scale: str, pre_errors: dict[int, str]) 
 
     # Time: parse, convert scale, range.
     t_read, t_errors = _parse_times(df["time"])
+    leap = _leap_second_rows(df["time"])
+    for i in np.flatnonzero(leap).tolist():
+        t_errors[i] = (
+            f"time {str(df['time'].iloc[i]).strip()!r} is a leap second (23:59:60): UTC seconds "
+            "since 1970 cannot hold it apart from the next 00:00:00, so it is not stored; send "
+            "this sample with time_scale=TAI or GPS"
+        )
+    if leap.any():
+        t_read = np.where(leap, np.nan, t_read)
     for i, why in t_errors.items():
         if i not in pre_errors:
             reasons.setdefault(i, []).append(why)
@@ -582,13 +1080,26 @@ def _validate(df: pd.DataFrame, *, time_scale: str, pre_errors: dict[int, str]) 
     _add(reasons, np.flatnonzero(out_of_range), "time outside 1900–2200")
     no_leap = finite_t & ~out_of_range & ~np.isfinite(t_utc)
     _add(reasons, np.flatnonzero(no_leap), f"time before 1972 cannot be read as {time_scale}")
+    if time_scale.strip().upper() != "UTC":
+        # A TAI/GPS instant inside a UTC leap second has no POSIX UTC time of its own.
+        ok = finite_t & ~out_of_range & np.isfinite(t_utc)
+        back = np.full(n, np.nan)
+        back[ok] = from_utc_s(t_utc[ok], scale=time_scale)
+        in_leap = ok & (np.abs(back - t_read) > 1e-6)
+        for i in np.flatnonzero(in_leap).tolist():
+            reasons.setdefault(i, []).append(
+                f"time falls in the leap second 23:59:60 UTC before "
+                f"{_iso_z(t_utc[i : i + 1])[0]}: UTC seconds since 1970 cannot hold it apart "
+                "from the next second, so it is not stored"
+            )
 
     def numeric_block(cols: Sequence[str]) -> FloatArray:
         out = np.empty((n, len(cols)))
         for j, c in enumerate(cols):
-            values, not_number = _numeric_column(df[c])
+            values, not_number, is_bool = _numeric_column(df[c])
             out[:, j] = values
-            _add(reasons, np.flatnonzero(not_number), f"{c} is not a number")
+            _add(reasons, np.flatnonzero(is_bool), f"{c} is a boolean (true/false), not a number")
+            _add(reasons, np.flatnonzero(not_number & ~is_bool), f"{c} is not a number")
             nonfinite = ~np.isfinite(values) & ~not_number
             _add(reasons, np.flatnonzero(nonfinite), f"{c} is missing or not finite")
         return out
@@ -628,8 +1139,15 @@ def _validate(df: pd.DataFrame, *, time_scale: str, pre_errors: dict[int, str]) 
     for c in columns:
         if not c.startswith(HK_PREFIX):
             continue
-        values, not_number = _numeric_column(df[c])
-        if not_number.any():
+        values, not_number, is_bool = _numeric_column(df[c])
+        if is_bool.any():
+            # A flag channel: kept as the text "true"/"false", never as the numbers 1 and 0.
+            col = df[c].astype(object)
+            text = col.map(
+                lambda v: ("true" if v else "false") if isinstance(v, bool | np.bool_) else v
+            )
+            hk[c] = text.where(col.notna(), "").astype(str).to_numpy(object)
+        elif not_number.any():
             # A text channel (flags, modes): kept as str, never rejected.
             hk[c] = df[c].astype(object).where(df[c].notna(), "").astype(str).to_numpy(object)
         else:
@@ -641,7 +1159,8 @@ def _validate(df: pd.DataFrame, *, time_scale: str, pre_errors: dict[int, str]) 
     if reasons:
         rejected_mask[np.fromiter(reasons.keys(), dtype=np.intp)] = True
     candidates = np.flatnonzero(~rejected_mask)
-    t_c = t_utc[candidates]
+    # Times are stored to the microsecond: rows equal at that resolution are duplicates.
+    t_c = np.rint(t_utc[candidates] * 1e6)
     order = np.argsort(t_c, kind="stable")
     t_sorted = t_c[order]
     dup_sorted = np.zeros(t_sorted.shape, dtype=bool)
@@ -652,8 +1171,9 @@ def _validate(df: pd.DataFrame, *, time_scale: str, pre_errors: dict[int, str]) 
         for k in np.flatnonzero(dup_sorted).tolist():
             row = int(candidates[order[k]])
             first = int(candidates[order[first_pos[k]]])
+            same = "" if t_utc[row] == t_utc[first] else " at microsecond resolution"
             reasons.setdefault(row, []).append(
-                f"duplicate time {_iso_z(t_utc[row : row + 1])[0]} (row {first} kept)"
+                f"duplicate time {_iso_z(t_utc[row : row + 1])[0]}{same} (row {first} kept)"
             )
         rejected_mask[candidates[order[dup_sorted]]] = True
         keep_sorted = candidates[order[~dup_sorted]]

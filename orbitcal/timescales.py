@@ -15,14 +15,16 @@ the first second of the next day. ``tai_to_utc`` maps a TAI instant inside a lea
 
 from __future__ import annotations
 
-import functools
 import re
+import threading
 from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
+
+from orbitcal.errors import BadInputError
 
 if TYPE_CHECKING:  # pragma: no cover
     from skyfield.timelib import Time, Timescale
@@ -37,10 +39,13 @@ __all__ = [
     "from_utc_s",
     "gps_to_utc",
     "iso_to_utc_s",
+    "leap_seconds_expiry_utc_s",
     "mjd2000_to_utc_s",
     "parse_time_values",
+    "reset_tables",
     "skyfield_timescale",
     "skyfield_to_utc_s",
+    "tables_epoch",
     "tai_minus_utc_s",
     "tai_to_utc",
     "to_utc_s",
@@ -69,7 +74,9 @@ MJD2000_EPOCH_UTC_S = 946_684_800.0
 #: Source: IERS Bulletin C (https://hpiers.obspm.fr/iers/bul/bulc/Leap_Second.dat); the last leap
 #: second was inserted at the end of 2016-12-31 (Bulletin C 52), and none has been announced since
 #: (through Bulletin C 70). Before 1972-01-01 UTC had fractional steps and rate offsets; orbitcal
-#: does not model them and returns NaN there.
+#: does not model them and returns NaN there. The conversions read the table in use from
+#: :mod:`orbitcal.auxdata` (the shipped IERS ``leap-seconds.list`` or a newer installed one, with
+#: its expiry); this copy is the cross-check the tests hold that table to.
 LEAP_SECOND_TABLE: tuple[tuple[str, int], ...] = (
     ("1972-01-01", 10),
     ("1972-07-01", 11),
@@ -101,16 +108,65 @@ LEAP_SECOND_TABLE: tuple[tuple[str, int], ...] = (
     ("2017-01-01", 37),
 )
 
-_LEAP_UTC_S = np.array(
-    [np.datetime64(d, "s").astype(np.int64) for d, _ in LEAP_SECOND_TABLE], dtype=np.float64
-)
-_LEAP_OFFSET_S = np.array([o for _, o in LEAP_SECOND_TABLE], dtype=np.float64)
-# In TAI, offset k holds from (UTC start + offset k); the leap second itself, [start + offset k-1,
-# start + offset k), still carries offset k-1 and so lands on the first POSIX second of the new day.
-_LEAP_TAI_S = _LEAP_UTC_S + _LEAP_OFFSET_S
+_TABLE_LOCK = threading.Lock()
+# (UTC starts, offsets, TAI starts) of the leap-second table in use, and the Skyfield timescale
+# built from it and the EOP table; None until first used, cleared by reset_tables().
+_LEAP_ARRAYS: tuple[FloatArray, FloatArray, FloatArray] | None = None
+_TIMESCALE: list[Timescale] = []
+_EPOCH = [0]
 
 
-class TimeScaleError(ValueError):
+def tables_epoch() -> int:
+    """A counter that changes whenever the leap-second or EOP table in use may have changed."""
+    return _EPOCH[0]
+
+
+def _leap_arrays() -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The active leap-second table (:mod:`orbitcal.auxdata`): UTC starts, offsets, TAI starts.
+
+    In TAI, offset k holds from (UTC start + offset k); the leap second itself, [start + offset
+    k-1, start + offset k), still carries offset k-1 and so lands on the first POSIX second of the
+    new day.
+    """
+    global _LEAP_ARRAYS
+    arrays = _LEAP_ARRAYS
+    if arrays is None:
+        from orbitcal.auxdata.tables import active_table
+
+        table = active_table("leap_seconds")
+        if table is None:  # pragma: no cover - a leap-second table always ships
+            utc = np.array(
+                [np.datetime64(d, "s").astype(np.int64) for d, _ in LEAP_SECOND_TABLE],
+                dtype=np.float64,
+            )
+            off = np.array([o for _, o in LEAP_SECOND_TABLE], dtype=np.float64)
+        else:
+            utc = np.asarray(table.parsed.data["t_utc_s"], dtype=np.float64)
+            off = np.asarray(table.parsed.data["tai_minus_utc_s"], dtype=np.float64)
+        arrays = (utc, off, utc + off)
+        with _TABLE_LOCK:
+            _LEAP_ARRAYS = arrays
+    return arrays
+
+
+def reset_tables() -> None:
+    """Forget the cached leap-second table and Skyfield timescale (after a table update)."""
+    global _LEAP_ARRAYS
+    with _TABLE_LOCK:
+        _LEAP_ARRAYS = None
+        _TIMESCALE.clear()
+        _EPOCH[0] += 1
+
+
+def leap_seconds_expiry_utc_s() -> float:
+    """The expiry of the leap-second table in use [POSIX s]: after it TAI − UTC is not known."""
+    from orbitcal.auxdata.tables import active_table
+
+    table = active_table("leap_seconds")
+    return float(table.parsed.valid_until_utc_s) if table is not None else float("nan")
+
+
+class TimeScaleError(BadInputError):
     """An unknown time scale was named; use one of ``UTC``, ``TAI``, ``GPS``."""
 
 
@@ -118,9 +174,9 @@ def _as_float_array(t: npt.ArrayLike) -> FloatArray:
     return np.asarray(t, dtype=np.float64)
 
 
-def _offset_lookup(t_s: FloatArray, thresholds_s: FloatArray) -> FloatArray:
+def _offset_lookup(t_s: FloatArray, thresholds_s: FloatArray, offsets_s: FloatArray) -> FloatArray:
     idx = np.searchsorted(thresholds_s, t_s, side="right") - 1
-    out = _LEAP_OFFSET_S[np.clip(idx, 0, None)]
+    out = offsets_s[np.clip(idx, 0, None)]
     return np.where((idx >= 0) & np.isfinite(t_s), out, np.nan)
 
 
@@ -135,10 +191,12 @@ def tai_minus_utc_s(t_utc_s: npt.ArrayLike) -> FloatArray:
     Returns
     -------
     ndarray, shape (N,)
-        TAI − UTC [s] (whole seconds) from :data:`LEAP_SECOND_TABLE`; NaN before 1972-01-01
-        and for non-finite input.
+        TAI − UTC [s] (whole seconds) from the leap-second table in use (:mod:`orbitcal.auxdata`;
+        past its expiry the last offset, see :func:`leap_seconds_expiry_utc_s`); NaN before
+        1972-01-01 and for non-finite input.
     """
-    return _offset_lookup(_as_float_array(t_utc_s), _LEAP_UTC_S)
+    utc, off, _ = _leap_arrays()
+    return _offset_lookup(_as_float_array(t_utc_s), utc, off)
 
 
 def utc_to_tai(t_utc_s: npt.ArrayLike) -> FloatArray:
@@ -154,7 +212,8 @@ def tai_to_utc(t_tai_s: npt.ArrayLike) -> FloatArray:
     so ``utc_to_tai(tai_to_utc(t))`` differs from ``t`` by 1 s only within leap seconds.
     """
     t = _as_float_array(t_tai_s)
-    return t - _offset_lookup(t, _LEAP_TAI_S)
+    _, off, tai = _leap_arrays()
+    return t - _offset_lookup(t, tai, off)
 
 
 def utc_to_gps(t_utc_s: npt.ArrayLike) -> FloatArray:
@@ -420,12 +479,47 @@ def utc_s_to_iso(t_utc_s: npt.ArrayLike) -> list[str]:
 _UNIX_EPOCH_JD = 2_440_587.5  # JD of 1970-01-01T00:00:00 (any scale's reading)
 
 
-@functools.cache
 def skyfield_timescale() -> Timescale:
-    """Skyfield's builtin timescale (bundled leap seconds and UT1 − UTC; no download), cached."""
-    from skyfield.api import load
+    """A Skyfield timescale from the tables in use (:mod:`orbitcal.auxdata`), cached.
 
-    return load.timescale(builtin=True)
+    Leap seconds from the active leap-second table; ΔT = TT − UT1 from the active EOP table's
+    UT1 − UTC (daily, at 0 h UTC); polar motion installed when that table has it (IERS
+    finals2000A), so :mod:`orbitcal.frames` applies W. With only the shipped copies this equals
+    Skyfield's builtin timescale (its own ``iers.npz``) without polar motion. No download.
+    """
+    if _TIMESCALE:
+        return _TIMESCALE[0]
+    from skyfield.data.iers import install_polar_motion_table
+    from skyfield.timelib import Timescale as _Timescale
+
+    from orbitcal.auxdata.tables import active_table
+
+    utc, off, _ = _leap_arrays()
+    leap_jd = utc / 86_400.0 + _UNIX_EPOCH_JD
+    eop = active_table("eop")
+    if eop is None:  # pragma: no cover - an EOP table always ships
+        from skyfield.api import load
+
+        ts = load.timescale(builtin=True)
+    else:
+        data = eop.parsed.data
+        mjd = np.asarray(data["mjd"], dtype=np.float64)
+        t_rows = (mjd - 40_587.0) * 86_400.0
+        tt_minus_utc = _offset_lookup(t_rows, utc, off) + 32.184
+        daily_tt = mjd + 2_400_000.5 + tt_minus_utc / 86_400.0
+        delta_t = (tt_minus_utc - np.asarray(data["dut1_s"], dtype=np.float64)).round(7)
+        ts = _Timescale((daily_tt, delta_t), leap_jd[1:], off[1:])
+        x = np.asarray(data["x_arcsec"], dtype=np.float64)
+        y = np.asarray(data["y_arcsec"], dtype=np.float64)
+        pm = np.isfinite(x) & np.isfinite(y)
+        if pm.sum() >= 2:
+            install_polar_motion_table(
+                ts, {"utc_mjd": mjd[pm], "x_arcseconds": x[pm], "y_arcseconds": y[pm]}
+            )
+    with _TABLE_LOCK:
+        if not _TIMESCALE:
+            _TIMESCALE.append(ts)
+        return _TIMESCALE[0]
 
 
 def utc_s_to_skyfield(t_utc_s: npt.ArrayLike) -> Time:
@@ -451,7 +545,8 @@ def skyfield_to_utc_s(t: Time) -> FloatArray:
 
 
 def ut1_minus_utc_s(t_utc_s: npt.ArrayLike) -> FloatArray:
-    """UT1 − UTC [s] from Skyfield's builtin IERS table (predictions/extrapolation beyond it)."""
+    """UT1 − UTC [s] from the EOP table in use (Bulletin A predictions within it, Skyfield's
+    long-term ΔT extrapolation past its end; :func:`orbitcal.auxdata.table_status` says which)."""
     return np.asarray(utc_s_to_skyfield(t_utc_s).dut1, dtype=np.float64)
 
 

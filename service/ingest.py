@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import zlib
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -20,6 +21,7 @@ __all__ = [
     "ParsedUpload",
     "decompress",
     "parse_body",
+    "telemetry_row_batches",
     "telemetry_to_rows",
 ]
 
@@ -47,21 +49,63 @@ class ParsedUpload:
 
 
 def decompress(body: bytes, encoding: str, *, limit: int) -> bytes:
-    """Undo ``Content-Encoding: gzip|deflate`` without ever holding more than ``limit`` bytes."""
-    encoding = encoding.strip().lower()
-    if encoding in ("", "identity"):
+    """Undo ``Content-Encoding: gzip|deflate`` without ever holding more than ``limit`` bytes.
+
+    The compressed stream must be whole: it must end exactly where the body ends (no truncated
+    stream, no trailing bytes). Several gzip members (RFC 1952 allows them) are all read, and
+    their total counts against ``limit``. Anything else raises, so nothing of a damaged body is
+    ever parsed or stored.
+
+    Raises
+    ------
+    BodyTooLargeError
+        The decompressed body exceeds ``limit`` bytes.
+    ValueError
+        Unsupported encoding, or a corrupt, truncated or trailing-garbage stream.
+    """
+    codings = [c.strip().lower() for c in encoding.split(",") if c.strip()]
+    codings = [c for c in codings if c != "identity"]
+    if not codings:
         return body
-    if encoding not in ("gzip", "deflate"):
-        raise ValueError(f"Content-Encoding {encoding!r} is not supported; use gzip or none")
-    wbits = 16 + zlib.MAX_WBITS if encoding == "gzip" else zlib.MAX_WBITS
-    d = zlib.decompressobj(wbits)
-    try:
-        out = d.decompress(body, limit + 1)
-    except zlib.error as exc:
-        raise ValueError(f"body is not valid {encoding}: {exc}") from None
-    if len(out) > limit or d.unconsumed_tail:
-        raise BodyTooLargeError(f"decompressed body exceeds {limit} bytes")
-    return out
+    if len(codings) > 1:
+        raise ValueError(
+            f"Content-Encoding {encoding!r}: only one coding (gzip or deflate) is supported"
+        )
+    coding = {"x-gzip": "gzip"}.get(codings[0], codings[0])
+    if coding not in ("gzip", "deflate"):
+        raise ValueError(f"Content-Encoding {coding!r} is not supported; use gzip, deflate or none")
+    if not body:
+        raise ValueError(f"body is empty but declares Content-Encoding {coding}")
+    wbits = 16 + zlib.MAX_WBITS if coding == "gzip" else zlib.MAX_WBITS
+    out: list[bytes] = []
+    size = 0
+    rest = body
+    member = 0
+    while True:
+        d = zlib.decompressobj(wbits)
+        try:
+            chunk = d.decompress(rest, limit - size + 1)
+        except zlib.error as exc:
+            raise ValueError(f"body is not valid {coding} (member {member + 1}): {exc}") from None
+        size += len(chunk)
+        if size > limit or d.unconsumed_tail:
+            raise BodyTooLargeError(f"decompressed body exceeds {limit} bytes (max_body_bytes)")
+        out.append(chunk)
+        if not d.eof:
+            raise ValueError(
+                f"{coding} stream is truncated: it ends before its end marker and checksum "
+                f"(member {member + 1}); nothing was stored"
+            )
+        rest = d.unused_data
+        if not rest:
+            return b"".join(out)
+        if coding == "gzip" and rest[:2] == b"\x1f\x8b":
+            member += 1  # another gzip member: read it too
+            continue
+        raise ValueError(
+            f"{len(rest)} bytes follow the end of the {coding} stream: the body must end where "
+            "the compressed data ends; nothing was stored"
+        )
 
 
 def _packets_to_frame(decoded: ccsds.DecodedPackets) -> pd.DataFrame:
@@ -137,3 +181,15 @@ def telemetry_to_rows(spacecraft_pk: int, tel: Telemetry) -> list[tuple[Any, ...
     else:
         columns.append([None] * n)
     return list(zip(*columns, strict=True))
+
+
+#: Rows converted to Python tuples at a time (bounds the memory of a large upload's insert).
+INSERT_BATCH_ROWS = 50_000
+
+
+def telemetry_row_batches(
+    spacecraft_pk: int, tel: Telemetry, batch_rows: int = INSERT_BATCH_ROWS
+) -> Iterator[list[tuple[Any, ...]]]:
+    """:func:`telemetry_to_rows` in slices of ``batch_rows`` (insert them in one transaction)."""
+    for start in range(0, len(tel), batch_rows):
+        yield telemetry_to_rows(spacecraft_pk, tel.select(slice(start, start + batch_rows)))

@@ -1,4 +1,4 @@
-"""Shared fixtures: paths to reference data and service availability.
+"""Shared fixtures: paths to reference data (all inside the repository) and service availability.
 
 Tests that need the PostgreSQL/Redis/RabbitMQ servers are marked ``services``. Outside CI they skip
 when a server is absent; in CI (``CI=true``) they fail instead, so they never skip quietly there.
@@ -11,11 +11,26 @@ import socket
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, settings
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 AUTHORITIES = REPO_ROOT / "tests" / "authorities"
-SHARED_DATA = Path(os.environ.get("ORBITCAL_SHARED_DATA", REPO_ROOT.parent / "shared" / "data"))
 IN_CI = os.environ.get("CI", "").lower() in {"1", "true", "yes"}
+
+# Hypothesis: one deterministic profile, in CI and on every fresh clone alike. derandomize makes
+# the examples a function of the test alone (no random seed, no example database carried between
+# runs), so a red run is a real regression that reproduces anywhere. Every failing example ever
+# found stays in its test as an explicit @example. HYPOTHESIS_PROFILE=explore searches afresh.
+settings.register_profile(
+    "ci",
+    derandomize=True,
+    database=None,
+    print_blob=True,
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow],
+)
+settings.register_profile("explore", deadline=None, print_blob=True)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 
 def port_open(host: str, port: int, timeout_s: float = 0.5) -> bool:
@@ -41,11 +56,34 @@ def authorities() -> Path:
     return AUTHORITIES
 
 
+#: The real CelesTrak sets (Swarm A/B/C, ISS; provenance in tests/authorities/README.md).
+REAL_TLES_FILE = AUTHORITIES / "swarm_iss_real_tles.tle"
+
+
 @pytest.fixture(scope="session")
-def shared_data() -> Path:
-    if not SHARED_DATA.is_dir():
-        pytest.fail(f"shared reference data not found at {SHARED_DATA} (set ORBITCAL_SHARED_DATA)")
-    return SHARED_DATA
+def real_tles_text() -> str:
+    """The 56 real TLE sets of ``tests/authorities/swarm_iss_real_tles.tle`` as one text."""
+    return REAL_TLES_FILE.read_text()
+
+
+@pytest.fixture(scope="session")
+def swarm_a_tle(real_tles_text: str) -> str:
+    """Swarm A's (NORAD 39452) set in effect on 2022-08-02 00:00 UTC, three-line text."""
+    from orbitcal.orbit import select_orbit
+
+    return select_orbit(
+        real_tles_text, norad_id=39452, at_utc_s=1_659_398_400.0, prefer_past=True
+    ).to_tle_text()
+
+
+@pytest.fixture
+def single_thread_blas():  # type: ignore[no-untyped-def]
+    """BLAS on one thread for the test (tiny least-squares fits only contend on a shared 2-core
+    machine); use with ``pytestmark = pytest.mark.usefixtures("single_thread_blas")``."""
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(1):
+        yield
 
 
 @pytest.fixture(autouse=True, scope="session")

@@ -370,3 +370,62 @@ def test_spreadsheet_csv_with_bom_and_spaced_header() -> None:
     res = parse_telemetry(csv, fmt="csv")
     assert res.rejected == []
     np.testing.assert_array_equal(res.telemetry.b_raw_nt, [[1, 2, 3]])
+
+
+# --- issue 10: limits and malformed values, at the library level (the CLI reads files too) -------
+
+
+def test_limits_are_enforced_before_parsing_and_name_the_limit() -> None:
+    from orbitcal.errors import LimitExceededError
+    from orbitcal.telemetry import ParseLimits
+
+    small = ParseLimits(max_rows=3, max_columns=5, max_json_depth=3, max_string_chars=8)
+    rows = b"time,b_x,b_y,b_z\n" + b"1690000000,1,2,3\n" * 4
+    cases = [
+        (rows, "csv", "max_rows"),
+        (b"time,b_x,b_y,b_z,hk_a,hk_b\n1,2,3,4,5,6\n", "csv", "max_columns"),
+        (b'{"time": 1690000000, "b_x": [[[1]]], "b_y": 2, "b_z": 3}', "ndjson", "max_json_depth"),
+        (
+            b'[{"time": 1690000000, "b_x": 1, "b_y": 2, "b_z": 3, "hk_s": "0123456789"}]',
+            "json",
+            "max_string_chars",
+        ),
+    ]
+    for body, fmt, name in cases:
+        with pytest.raises(LimitExceededError, match=name) as info:
+            parse_telemetry(body, fmt=fmt, limits=small)  # type: ignore[arg-type]
+        assert info.value.limit_name == name
+
+
+def test_booleans_are_not_numbers_and_flags_stay_text() -> None:
+    body = (
+        b'[{"time": 1690000000, "b_x": true, "b_y": 2, "b_z": 3},'
+        b' {"time": 1690000001, "b_x": 1, "b_y": 2, "b_z": 3, "hk_flag": false}]'
+    )
+    res = parse_telemetry(body, fmt="json")
+    assert [(e.row, e.reason) for e in res.rejected] == [
+        (0, "b_x is a boolean (true/false), not a number")
+    ]
+    assert res.telemetry.hk["hk_flag"].tolist() == ["false"]
+
+
+def test_leap_second_is_rejected_and_the_next_second_kept() -> None:
+    body = b"time,b_x,b_y,b_z\n2016-12-31T23:59:60Z,1,2,3\n2017-01-01T00:00:00Z,4,5,6\n"
+    res = parse_telemetry(body, fmt="csv")
+    assert [e.row for e in res.rejected] == [0] and "leap second" in res.rejected[0].reason
+    assert res.telemetry.t_utc_s.tolist() == [1_483_228_800.0]
+    assert res.telemetry.b_raw_nt[0].tolist() == [4.0, 5.0, 6.0]
+
+
+def test_times_equal_to_the_microsecond_are_duplicates() -> None:
+    body = b"time,b_x,b_y,b_z\n1690000000.0000001,1,2,3\n1690000000.0000004,4,5,6\n"
+    res = parse_telemetry(body, fmt="csv")
+    assert [e.row for e in res.rejected] == [1]
+    assert "microsecond resolution (row 0 kept)" in res.rejected[0].reason
+
+
+def test_repeated_columns_and_non_utf8_text_name_the_place() -> None:
+    with pytest.raises(TelemetryError, match="repeated column name 'b_x'"):
+        parse_telemetry(b"time,b_x,b_x,b_z\n1690000000,1,2,3\n", fmt="csv")
+    with pytest.raises(TelemetryError, match="row 1 is not UTF-8"):
+        parse_telemetry(b"time,b_x,b_y,b_z,hk_s\n1,2,3,4,a\n2,2,3,4,\xe9\n", fmt="csv")

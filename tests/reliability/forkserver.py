@@ -10,7 +10,7 @@ them with real signals. Children are reaped automatically (``SIGCHLD`` ignored).
 Spec keys: ``kind`` (``cli`` | ``app`` | ``retrain``), ``log`` (file for the child's stdout and
 stderr), ``env`` (extra environment), and per kind ``argv``; ``settings``, ``port``,
 ``fit_delay_s``; ``settings``, ``job_id``, ``fit_delay_s``; any kind: ``patch_fit_delay_s``
-(replaces ``service.science.fit_calibration`` by a slow one in the child).
+(replaces ``orbitcal.pipeline.fit_document`` by a slow one in the child).
 """
 
 from __future__ import annotations
@@ -27,11 +27,11 @@ import uvicorn
 import orbitcal.cli
 import service.app
 import service.jobs
-from service import science
+from orbitcal import pipeline
 from service.settings import Settings
 from service.storage import make_engine
 
-_REAL_FIT = science.fit_calibration
+_REAL_FIT = pipeline.fit_document
 
 
 def _slow_fit(delay_s: float) -> Any:
@@ -46,7 +46,7 @@ def _child(spec: dict[str, Any]) -> int:
     os.environ.update(spec.get("env", {}))
     kind = spec["kind"]
     if spec.get("patch_fit_delay_s"):  # e.g. for `orbitcal worker`, whose fit is not injectable
-        science.fit_calibration = _slow_fit(float(spec["patch_fit_delay_s"]))
+        pipeline.fit_document = _slow_fit(float(spec["patch_fit_delay_s"]))
     if kind == "cli":
         return orbitcal.cli.main(spec["argv"])
     settings = Settings(**spec.get("settings", {}))

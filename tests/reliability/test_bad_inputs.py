@@ -232,10 +232,11 @@ def test_ndjson_starting_with_null_is_a_row_error_not_a_crash(
     assert [e["row"] for e in r.json()["rejected"]] == list(range(n_null))
     assert "JSON" in r.json()["rejected"][0]["reason"]
     assert _stored(db) == before + 3
-    # A body with no object at all has no columns: a whole-table error naming what is missing.
+    # A body with no object at all: every row rejected (422), each with its reason.
     r = _post(s, b"null", {"content-type": "application/x-ndjson"})
-    assert r.status_code == 400, r.text
-    assert "missing required column 'time'" in r.json()["detail"]
+    assert r.status_code == 422, r.text
+    assert "not a JSON object" in r.json()["detail"]
+    assert r.json()["rejected"][0]["row"] == 0
     with s.client() as http:
         assert http.get("/healthz").status_code == 200
 
@@ -353,4 +354,8 @@ def test_decayed_tle_and_dates_outside_igrf_fail_the_retraining_clearly(
         )
         assert r.json()["accepted"] == 300
         error = _retrain_error(http, "future")
-        assert "IGRF-14 is valid" in error and "2030" in error, error
+        # Either the field model's span is named, or (issue 10 item 7) the rows dated in the
+        # future are left out of the window and the job says so.
+        assert ("IGRF-14 is valid" in error and "2030" in error) or (
+            "300 dated in the future" in error
+        ), error

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import pytest
-from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 
 from orbitcal import ccsds
@@ -176,6 +176,11 @@ def test_any_bytes_parse_or_raise_the_documented_error(data: bytes, fmt: str) ->
         max_size=8,
     )
 )
+# Found on a fresh clone: the old fast path joined all lines into one JSON array, so the lines
+# '"' and '"' became the one string "," — a row lost and every later row number shifted.
+@example(lines=['"', '"'])
+@example(lines=['"', '"', '{"time": 1e9, "b_x": 1, "b_y": 2, "b_z": 3}'])
+@example(lines=["[1", "2]"])
 def test_ndjson_lines_of_any_text_never_crash(lines: list[str]) -> None:
     body = "\n".join(lines).encode("utf-8", "surrogatepass")
     with warnings.catch_warnings():
@@ -185,8 +190,8 @@ def test_ndjson_lines_of_any_text_never_crash(lines: list[str]) -> None:
         except TelemetryError:
             return
     # every non-blank line is one row: kept or rejected with a reason, never both, never lost
-    n_lines = len([ln for ln in body.splitlines() if ln.strip()])
-    assert len(result.telemetry) + len(result.rejected) == n_lines
+    kept = [ln for ln in body.splitlines() if ln.strip()]
+    assert len(result.telemetry) + len(result.rejected) == len(kept)
     assert len({e.row for e in result.rejected}) == len(result.rejected)
 
 
@@ -251,6 +256,10 @@ def test_damage_is_confined_to_the_damaged_packets(
     prefix=st.binary(max_size=200),
     lengths=st.lists(st.integers(0, 300), max_size=5),
 )
+# Found on a fresh clone: a packet whose time field is zero (1958-01-01 TAI, before UTC has
+# leap seconds) decoded to a NaN time; it is now rejected with the reason.
+@example(prefix=b"", lengths=[78])
+@example(prefix=b"", lengths=[78, 78])
 def test_decoder_never_crashes_on_headers_with_any_length(
     prefix: bytes, lengths: list[int]
 ) -> None:
@@ -267,3 +276,64 @@ def test_decoder_never_crashes_on_headers_with_any_length(
     assert np.all(np.isfinite(dec.t_utc_s))
     numbers = sorted([*dec.index.tolist(), *(i for i, _ in dec.rejected)])
     assert numbers == sorted(set(numbers))  # each packet number decoded or rejected, once
+
+
+def test_ndjson_quote_lines_are_two_rows_and_numbering_holds() -> None:
+    body = b'"\n"\n{"time": 1e9, "b_x": 1, "b_y": 2, "b_z": 3}\n'
+    result = parse_telemetry(body, fmt="ndjson")
+    assert [e.row for e in result.rejected] == [0, 1]
+    assert all("not valid JSON" in e.reason for e in result.rejected)
+    assert len(result.telemetry) == 1
+
+
+def test_zero_time_packet_is_rejected_with_the_reason() -> None:
+    good = ccsds.encode_packets(np.array([T_LO_US / 1e6]), np.ones((1, 3)))
+    zero = bytearray(good)
+    zero[6:13] = bytes(7)  # CUC coarse and fine time = 0
+    dec = ccsds.decode_packets(bytes(zero) + good)
+    np.testing.assert_array_equal(dec.index, [1])
+    assert [i for i, _ in dec.rejected] == [0]
+    assert "before 1972-01-01" in dec.rejected[0][1]
+
+
+def _scan_reference(data: bytes, per_line: bool) -> tuple[int, int, int]:
+    """A byte-by-byte model of ``json_scan``: depth, commas and colons outside strings."""
+    depth = best = commas = colons = base = 0
+    inside = escaped = False
+    for b in data:
+        if b in (10, 13):
+            inside = escaped = False
+            base = depth
+            continue
+        was_escaped, escaped = escaped, (b == 92 and not escaped)
+        if b == 92:
+            continue
+        if b == 34:
+            inside = inside if was_escaped else not inside
+            continue
+        if inside:
+            continue
+        depth += (b in (91, 123)) - (b in (93, 125))
+        commas += b == 44
+        colons += b == 58
+        best = max(best, depth - base if per_line else depth)
+    return best, commas, colons
+
+
+@settings(max_examples=300)
+@given(data=st.binary(max_size=60).map(lambda b: bytes(b'"\\[]{},:\n\rab'[x % 12] for x in b)))
+@example(data=b'["\\"[[[", [[1]]]')
+@example(data=b'{"a":"\\\\"}\n[[[[')
+def test_json_scan_matches_a_byte_by_byte_model(data: bytes) -> None:
+    """The vectorised depth scanner (what guards orjson) against a plain loop, with chunks of a
+    few bytes so every carry between chunks (string, backslash run, depth) is exercised."""
+    from orbitcal import telemetry
+
+    old = telemetry._SCAN_CHUNK
+    telemetry._SCAN_CHUNK = 5
+    try:
+        for per_line in (False, True):
+            depth, _, commas, colons = telemetry.json_scan(data, per_line=per_line)
+            assert (depth, commas, colons) == _scan_reference(data, per_line)
+    finally:
+        telemetry._SCAN_CHUNK = old
