@@ -15,6 +15,13 @@ first and the last third of the run (after a warm-up).
 Usage: ``python benchmarks/load.py [--duration 300] [--clients 50] [--out FILE.md]`` (default
 ``benchmarks/results/load.md``).
 The test suite runs the same code for ~12 s (``tests/reliability/test_load.py``).
+
+Reads under load (issue 15): ``python benchmarks/load.py --reads-only --duration 60 --clients 50
+--compare-with REV --out benchmarks/results/load_reads.md`` runs only ``GET .../calibration``
+with a lean HTTP/1.1 keep-alive client (raw asyncio streams: ~20 µs of client CPU per request
+instead of httpx's ~400 µs, so that on 2 shared cores the figure is the server's) against the
+server of this checkout and, side by side in the same run, against the server of git revision
+``REV`` (checked out into a temporary worktree), alternating ``--rounds`` times.
 """
 
 from __future__ import annotations
@@ -56,6 +63,9 @@ class LoadResult:
     errors: list[str] = field(default_factory=list)
     rss_mb: list[tuple[float, float]] = field(default_factory=list)  # (t [s], RSS [MB])
     samples_ingested: int = 0
+    server_cpu_s: float = 0.0
+    client_cpu_s: float = 0.0
+    load_average: float = 0.0  # 1-minute load average at the end of the run
 
     @property
     def requests(self) -> int:
@@ -85,27 +95,24 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def start_server(db: Path, port: int, admin_key: str, log: Path) -> subprocess.Popen[bytes]:
+def start_server(
+    db: Path, port: int, admin_key: str, log: Path, *, repo: Path = REPO, workers: int = 1
+) -> subprocess.Popen[bytes]:
     env = {
         **os.environ,
         "ORBITCAL_ADMIN_KEY": admin_key,
         "ORBITCAL_LOG_LEVEL": "WARNING",
         "ORBITCAL_RATE_LIMIT_PER_S": "0",  # measure the service, not the limiter
-        "PYTHONPATH": str(REPO),
+        "PYTHONPATH": str(repo),
     }
+    argv = [sys.executable, "-m", "orbitcal", "serve", "--port", str(port)]
+    argv += ["--database", f"sqlite:///{db}", "--no-scheduler"]
+    if workers > 1:
+        argv += ["--workers", str(workers)]
     return subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "orbitcal",
-            "serve",
-            "--port",
-            str(port),
-            "--database",
-            f"sqlite:///{db}",
-            "--no-scheduler",
-        ],
+        argv,
         env=env,
+        cwd=str(repo),
         stdout=subprocess.DEVNULL,
         stderr=log.open("ab"),
     )
@@ -285,6 +292,160 @@ def run_load(
     return result
 
 
+async def _raw_reader(
+    c: int, port: int, paths: list[str], key: str, stop_at: float, result: LoadResult
+) -> None:
+    """One closed-loop client of ``GET`` requests on one keep-alive connection (raw HTTP/1.1)."""
+    rng = np.random.default_rng(c)
+    reader, writer = await asyncio.open_connection("127.0.0.1", port)
+    requests = [
+        f"GET {p} HTTP/1.1\r\nHost: 127.0.0.1\r\nX-API-Key: {key}\r\n\r\n".encode() for p in paths
+    ]
+    lat = result.latencies_s.setdefault("calibration", [])
+    try:
+        while time.monotonic() < stop_at:
+            request = requests[int(rng.integers(len(requests)))]
+            t0 = time.perf_counter()
+            writer.write(request)
+            status = int((await reader.readline()).split(b" ", 2)[1])
+            length = 0
+            while (line := await reader.readline()) not in (b"\r\n", b""):
+                name, _, value = line.partition(b":")
+                if name.strip().lower() == b"content-length":
+                    length = int(value)
+            body = await reader.readexactly(length)
+            dt = time.perf_counter() - t0
+            if status != 200 or not body.startswith(b"{"):
+                result.errors.append(f"calibration: {status} {body[:120]!r}")
+                continue
+            result.counts["calibration"] = result.counts.get("calibration", 0) + 1
+            lat.append(dt)
+    except (OSError, asyncio.IncompleteReadError, ValueError, IndexError) as exc:
+        result.errors.append(f"calibration: {type(exc).__name__}")
+    finally:
+        writer.close()
+
+
+def run_reads(
+    port: int, *, pid: int, ids: list[str], read_key: str, clients: int, duration_s: float
+) -> LoadResult:
+    """``clients`` closed-loop raw clients of ``GET .../calibration`` for ``duration_s``."""
+    result = LoadResult(duration_s=duration_s, clients=clients)
+    paths = [f"/v1/spacecraft/{sc}/calibration" for sc in ids]
+    procs = [psutil.Process(pid), *psutil.Process(pid).children(recursive=True)]
+    me = psutil.Process()
+
+    def cpu_s(ps: list[psutil.Process]) -> float:
+        return sum(t.user + t.system for t in (p.cpu_times() for p in ps))
+
+    async def main() -> None:
+        stop_at = time.monotonic() + duration_s
+        await asyncio.gather(
+            *(_raw_reader(c, port, paths, read_key, stop_at, result) for c in range(clients))
+        )
+
+    server0, client0 = cpu_s(procs), cpu_s([me])
+    t0 = time.monotonic()
+    try:
+        import uvloop
+
+        uvloop.run(main())
+    except ImportError:  # pragma: no cover - uvloop is a dependency on Linux
+        asyncio.run(main())
+    result.duration_s = time.monotonic() - t0
+    result.server_cpu_s = cpu_s(procs) - server0
+    result.client_cpu_s = cpu_s([me]) - client0
+    result.load_average = os.getloadavg()[0]
+    return result
+
+
+def _reads_round(
+    repo: Path,
+    label: str,
+    tmp: Path,
+    clients: int,
+    duration_s: float,
+    n_spacecraft: int,
+    workers: int = 1,
+) -> tuple[str, LoadResult]:
+    admin_key = "load-" + secrets.token_hex(16)
+    port = free_port()
+    url = f"http://127.0.0.1:{port}"
+    db = tmp / f"reads-{label}-{secrets.token_hex(4)}.sqlite"
+    proc = start_server(db, port, admin_key, tmp / "server.log", repo=repo, workers=workers)
+    try:
+        wait_healthy(url, proc)
+        ids, _jobs, read_key = prepare(url, admin_key, n_spacecraft)
+        # warm-up: fills the key and document caches, like any server that has been running
+        run_reads(port, pid=proc.pid, ids=ids, read_key=read_key, clients=clients, duration_s=2)
+        result = run_reads(
+            port, pid=proc.pid, ids=ids, read_key=read_key, clients=clients, duration_s=duration_s
+        )
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+    return label, result
+
+
+def reads_main(args: argparse.Namespace) -> str:
+    """Calibration reads only, this checkout against ``--compare-with`` in alternating rounds."""
+    rows: list[tuple[str, LoadResult]] = []
+    with tempfile.TemporaryDirectory(prefix="orbitcal-reads-") as tmp_name:
+        tmp = Path(tmp_name)
+        servers = [("this checkout", REPO, 1)]
+        if args.workers > 1:
+            servers.append((f"this checkout, {args.workers} workers", REPO, args.workers))
+        if args.compare_with:
+            other = tmp / "peer"
+            subprocess.run(
+                [
+                    "git",
+                    "-C",
+                    str(REPO),
+                    "worktree",
+                    "add",
+                    "--detach",
+                    str(other),
+                    args.compare_with,
+                ],
+                check=True,
+                capture_output=True,
+            )
+            servers.insert(0, (f"`{args.compare_with}`", other, 1))
+        try:
+            for _ in range(args.rounds):
+                for label, repo, workers in servers:
+                    rows.append(
+                        _reads_round(
+                            repo, label, tmp, args.clients, args.duration, args.spacecraft, workers
+                        )
+                    )
+        finally:
+            if args.compare_with:
+                subprocess.run(
+                    ["git", "-C", str(REPO), "worktree", "remove", "--force", str(tmp / "peer")],
+                    check=False,
+                    capture_output=True,
+                )
+    lines = [
+        "| server | requests/s | p50 [ms] | p99 [ms] | server CPU / request [ms] | "
+        "client CPU / request [ms] | load average | errors |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for label, r in rows:
+        n = max(1, r.requests)
+        p50 = r.percentile_ms("calibration", 50)
+        p99 = r.percentile_ms("calibration", 99)
+        cpu_ms = 1e3 * r.server_cpu_s / n
+        client_ms = 1e3 * r.client_cpu_s / n
+        rate = r.requests / r.duration_s
+        lines.append(
+            f"| {label} | {rate:.0f} | {p50:.2f} | {p99:.2f} | {cpu_ms:.3f} | {client_ms:.3f} | "
+            f"{r.load_average:.1f} | {len(r.errors)} |"
+        )
+    return "\n".join(lines)
+
+
 def machine() -> str:
     cpu = platform.processor() or platform.machine()
     try:
@@ -339,7 +500,34 @@ def main() -> None:
     p.add_argument("--spacecraft", type=int, default=5)
     p.add_argument("--ingest-share", type=float, default=0.2)
     p.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "load.md")
+    p.add_argument("--reads-only", action="store_true", help="only GET calibration, raw client")
+    p.add_argument("--compare-with", default="", help="--reads-only: git revision of the peer")
+    p.add_argument("--rounds", type=int, default=2, help="--reads-only: alternating rounds")
+    p.add_argument("--workers", type=int, default=1, help="--reads-only: also N API processes")
     args = p.parse_args()
+    if args.reads_only:
+        table = reads_main(args)
+        text = "\n".join(
+            [
+                "# Reads under load: `GET /v1/spacecraft/{id}/calibration` (`benchmarks/load.py`)",
+                "",
+                f"Machine: {machine()}.",
+                f"Run: `python benchmarks/load.py --reads-only --duration {args.duration:g} "
+                f"--clients {args.clients} --spacecraft {args.spacecraft} --rounds {args.rounds}"
+                + (f" --compare-with {args.compare_with}" if args.compare_with else "")
+                + (f" --workers {args.workers}" if args.workers > 1 else "")
+                + f"` on {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; `orbitcal serve` "
+                "(one process, or `--workers N`), SQLite; "
+                "clients in one process (raw HTTP/1.1 keep-alive, closed loop) on the same 2 "
+                "cores as the server; servers measured in alternating rounds.",
+                "",
+                table,
+                "",
+            ]
+        )
+        args.out.write_text(text)
+        print(text)
+        return
     admin_key = "load-" + secrets.token_hex(16)
     with tempfile.TemporaryDirectory(prefix="orbitcal-load-") as tmp:
         port = free_port()

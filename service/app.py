@@ -5,13 +5,17 @@ database (running migrations), the job runner and the scheduler. Nothing happens
 from __future__ import annotations
 
 import asyncio
+import fcntl
+import hashlib
 import logging
+import tempfile
 import threading
 import time
 from collections.abc import AsyncIterator, Callable
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import asynccontextmanager
-from typing import Any
+from pathlib import Path
+from typing import IO, Any
 
 import sqlalchemy as sa
 from fastapi import FastAPI, HTTPException, Request
@@ -20,12 +24,22 @@ from fastapi.responses import JSONResponse
 from starlette.types import ASGIApp, Receive, Scope, Send
 
 import orbitcal
+from orbitcal.errors import OrbitcalError
 from service.auth import is_loopback
 from service.jobs import FitFunction, InlineRunner, JobRunner, recover_interrupted
 from service.logs import configure_logging, redact_url
 from service.metrics import Metrics
-from service.ratelimit import RateLimit
-from service.routes import calibrations, dashboard, jobs, keys, ops, spacecraft, telemetry
+from service.ratelimit import Buckets, MemoryBuckets, RateLimit, RedisBuckets
+from service.routes import (
+    calibrations,
+    dashboard,
+    jobs,
+    keys,
+    ops,
+    quarantine,
+    spacecraft,
+    telemetry,
+)
 from service.scheduler import FleetScheduler
 from service.schemas import ErrorPublic
 from service.settings import Settings
@@ -110,6 +124,23 @@ def _error(
     )
 
 
+def _deployment_lock(deployment: str, *, wait: bool = False) -> IO[bytes] | None:
+    """An exclusive lock of this machine's processes serving one database, or None if taken.
+
+    ``flock`` on ``<tmp>/orbitcal-<digest of the database URL>.lock``; the kernel releases it
+    when the holder exits, however it exits, so a restarted process can take it over. With
+    ``wait`` the call blocks until the lock is free (closing the handle releases it).
+    """
+    path = Path(tempfile.gettempdir()) / f"orbitcal-{deployment}.lock"
+    handle = path.open("ab")
+    try:
+        fcntl.flock(handle.fileno(), fcntl.LOCK_EX if wait else fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        handle.close()
+        return None
+    return handle
+
+
 def create_app(
     settings: Settings | None = None,
     *,
@@ -136,10 +167,26 @@ def create_app(
             "bind to 127.0.0.1 or set ORBITCAL_ADMIN_KEY and leave ORBITCAL_AUTH on"
         )
 
+    # One deployment = one database: processes sharing it share the rate-limit buckets and elect
+    # one of them for the per-deployment duties (the digest keeps deployments apart without
+    # putting the database URL into Redis or a file name).
+    deployment = hashlib.sha256(settings.database_url.encode()).hexdigest()[:16]
+
+    if settings.workers > 1 and settings.rate_limit_per_s > 0 and not settings.rate_limit_redis_url:
+        raise ValueError(
+            f"{settings.workers} API processes would each keep their own rate-limit buckets: "
+            "set ORBITCAL_RATE_LIMIT_REDIS_URL (shared buckets) or ORBITCAL_RATE_LIMIT_PER_S=0"
+        )
+
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         engine = make_engine(settings.database_url, sqlite_synchronous=settings.sqlite_synchronous)
-        upgrade(engine)
+        migrating = _deployment_lock(deployment + "-migrate", wait=True)  # workers start at once
+        try:
+            upgrade(engine)
+        finally:
+            if migrating is not None:
+                migrating.close()
         metrics = Metrics(engine)
         app.state.engine = engine
         app.state.metrics = metrics
@@ -158,12 +205,17 @@ def create_app(
         else:
             job_runner = InlineRunner(engine, settings, fit=fit, on_done=on_done)
         app.state.runner = job_runner
-        if settings.job_backend == "inline" and runner is None:
+        # Duties of one process per deployment (several uvicorn workers share one database):
+        # the first process to take the lock recovers interrupted inline jobs and runs the
+        # scheduler; the others serve requests and run the jobs they were asked for.
+        leader = _deployment_lock(deployment)
+        app.state.leader = leader is not None
+        if settings.job_backend == "inline" and runner is None and leader is not None:
             for job_id in recover_interrupted(engine):
                 job_runner.submit(job_id)
         scheduler = FleetScheduler(engine, settings, job_runner)
         app.state.scheduler = scheduler
-        if settings.scheduler:
+        if settings.scheduler and leader is not None:
             scheduler.start()
         log.info(
             "service started",
@@ -182,12 +234,18 @@ def create_app(
             scheduler.shutdown()
             job_runner.shutdown()
             engine.dispose()
+            await rate_store.close()
+            if leader is not None:
+                leader.close()  # releases the lock
 
     app = FastAPI(
         title="orbitcal",
         version=orbitcal.__version__,
         summary="On-orbit magnetometer calibration: telemetry ingest, retraining, calibrations.",
         lifespan=lifespan,
+        # /docs and /redoc are served by routes/dashboard.py from local assets (no CDN)
+        docs_url=None,
+        redoc_url=None,
         # Answers every route may give, documented once (their body is ErrorPublic, not
         # FastAPI's default HTTPValidationError): found by tests/reliability/test_fuzz_openapi.py.
         responses={
@@ -226,11 +284,23 @@ def create_app(
     elif app.state.admin_key_hash is None:
         log.warning("no ORBITCAL_ADMIN_KEY set: no key can be created until one is")
 
+    rate_store: Buckets = (
+        RedisBuckets(settings.rate_limit_redis_url, prefix=f"orbitcal:ratelimit:{deployment}:")
+        if settings.rate_limit_redis_url
+        else MemoryBuckets()
+    )
+    app.state.rate_limit_store = rate_store
+    app.add_middleware(calibrations.CalibrationFastPath, state=app.state)
     app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
     app.add_middleware(AccessLog)
     if settings.rate_limit_per_s > 0:  # outermost: a throttled caller costs no body read
         app.add_middleware(
-            RateLimit, rate_per_s=settings.rate_limit_per_s, burst=settings.rate_limit_burst
+            RateLimit,
+            rate_per_s=settings.rate_limit_per_s,
+            burst=settings.rate_limit_burst,
+            auth_fail_per_s=settings.auth_fail_per_s,
+            auth_fail_burst=settings.auth_fail_burst,
+            store=rate_store,
         )
 
     @app.exception_handler(HTTPException)
@@ -238,6 +308,26 @@ def create_app(
         field = (exc.headers or {}).get("X-Error-Field")
         errors = [{"field": field, "reason": exc.detail}] if field else []
         return _error(exc.status_code, str(exc.detail), errors, dict(exc.headers or {}))
+
+    @app.exception_handler(OrbitcalError)
+    async def _library_error(_request: Request, exc: OrbitcalError) -> JSONResponse:
+        # The one place where the library's error tree becomes HTTP (orbitcal/errors.py has
+        # the table): routes let these propagate instead of catching built-in exception types.
+        item: dict[str, Any] = {"reason": str(exc)}
+        for name in ("field", "row"):
+            value = getattr(exc, name, None)
+            if value is not None:
+                item[name] = value
+        body_extra: dict[str, Any] = dict(getattr(exc, "body_extra", None) or {})
+        response = _error(exc.http_status, str(exc), [item])
+        if body_extra:
+            response = JSONResponse(
+                {"detail": str(exc), "errors": [item], **body_extra},
+                status_code=exc.http_status,
+            )
+        if exc.http_status == 503:
+            response.headers["Retry-After"] = "60"
+        return response
 
     @app.exception_handler(RequestValidationError)
     async def _validation_error(_request: Request, exc: RequestValidationError) -> JSONResponse:
@@ -287,6 +377,11 @@ def create_app(
         log.error("unexpected error", exc_info=exc)
         return _error(500, "internal error (logged)")
 
-    for module in (ops, spacecraft, telemetry, calibrations, jobs, keys, dashboard):
+    for module in (ops, spacecraft, telemetry, quarantine, calibrations, jobs, keys, dashboard):
         app.include_router(module.router)
     return app
+
+
+def app_from_environment() -> FastAPI:
+    """``create_app(Settings())``: the factory uvicorn imports in each worker process."""
+    return create_app(Settings())

@@ -16,13 +16,17 @@ from dataclasses import dataclass
 from typing import Annotated, Any
 
 import sqlalchemy as sa
-from fastapi import Depends, Header, HTTPException, Request
+from fastapi import Depends, HTTPException, Request, Security
 from fastapi.concurrency import run_in_threadpool
+from fastapi.security import APIKeyHeader
 
 from service.storage import ApiKey, hash_key, read_tx, write_tx
 
 __all__ = [
+    "SCOPE_ACTIONS",
     "SCOPE_RE",
+    "SPACECRAFT_ID_PATTERN",
+    "SPACECRAFT_ID_RE",
     "Principal",
     "create_key",
     "is_loopback",
@@ -31,8 +35,25 @@ __all__ = [
     "require_scope",
 ]
 
-SCOPE_RE = re.compile(r"^(admin|(ingest|read):(\*|[A-Za-z0-9_.\-]{1,64}))$")
+#: The grammar of spacecraft ids: 1 to 64 ASCII letters, digits, ``_``, ``.`` and ``-``, starting
+#: with a letter or digit. Such an id is one URL path segment as it is (no ``/``, no percent
+#: escapes, no control characters or spaces) and can never be ``.`` or ``..``, which clients and
+#: proxies would resolve away. ``\Z`` (not ``$``) so that a trailing newline is not allowed.
+SPACECRAFT_ID_PATTERN = r"[A-Za-z0-9][A-Za-z0-9_.\-]{0,63}"
+SPACECRAFT_ID_RE = re.compile(rf"\A{SPACECRAFT_ID_PATTERN}\Z")
+#: The actions a scope may name; ``admin`` stands alone, the others take ``:<spacecraft id|*>``.
+SCOPE_ACTIONS = ("ingest", "read")
+#: A scope, matched whole: ``admin``, ``ingest:<id|*>`` or ``read:<id|*>``.
+SCOPE_RE = re.compile(rf"\A(admin|({'|'.join(SCOPE_ACTIONS)}):(\*|{SPACECRAFT_ID_PATTERN}))\Z")
 KEY_PREFIX = "ock_"
+
+#: The ``X-API-Key`` security scheme of the OpenAPI document (the "Authorize" button of /docs).
+API_KEY_HEADER = APIKeyHeader(
+    name="X-API-Key",
+    scheme_name="X-API-Key",
+    description="API key (see docs/service.md); any value, or none, when authentication is off",
+    auto_error=False,
+)
 
 
 @dataclass(frozen=True)
@@ -97,7 +118,7 @@ def _lookup(engine: Any, key_hash: str) -> Principal | None:
 
 async def principal(
     request: Request,
-    x_api_key: Annotated[str | None, Header(description="API key (see docs/service.md)")] = None,
+    x_api_key: Annotated[str | None, Security(API_KEY_HEADER)] = None,
 ) -> Principal:
     """Resolve the caller from ``X-API-Key`` (dependency).
 

@@ -6,7 +6,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from service.auth import SCOPE_RE
+from service.auth import SCOPE_RE, SPACECRAFT_ID_PATTERN
 
 __all__ = [
     "ApiKeyCreated",
@@ -27,7 +27,8 @@ __all__ = [
     "SpacecraftPublic",
 ]
 
-SPACECRAFT_ID = r"^[A-Za-z0-9_.\-]{1,64}$"
+#: ``service.auth.SPACECRAFT_ID_PATTERN`` anchored (pydantic's regex engine: ``$`` is the very end).
+SPACECRAFT_ID = rf"^{SPACECRAFT_ID_PATTERN}$"
 
 
 class ErrorItem(BaseModel):
@@ -67,7 +68,11 @@ class _OrbitFields(BaseModel):
 
 class SpacecraftIn(_OrbitFields):
     model_config = ConfigDict(extra="forbid")
-    id: str = Field(pattern=SPACECRAFT_ID, description="spacecraft identifier")
+    id: str = Field(
+        pattern=SPACECRAFT_ID,
+        description="spacecraft identifier: 1-64 of A-Z a-z 0-9 _ . -, starting with a letter "
+        "or digit (one URL path segment as it is)",
+    )
     attitude_frame: Literal["GCRS", "ITRS"] = "GCRS"
     schedule: ScheduleIn | None = None
 
@@ -165,10 +170,11 @@ class ApiKeyIn(BaseModel):
     @field_validator("scopes")
     @classmethod
     def _valid_scopes(cls, scopes: list[str]) -> list[str]:
-        for s in scopes:
-            if not SCOPE_RE.match(s):
+        for i, s in enumerate(scopes):
+            if not SCOPE_RE.fullmatch(s):
                 raise ValueError(
-                    f"scope {s!r} is not admin, ingest:<spacecraft|*> or read:<spacecraft|*>"
+                    f"scopes[{i}] = {s!r} is not admin, ingest:<spacecraft|*> or "
+                    "read:<spacecraft|*> (spacecraft ids as in POST /v1/spacecraft)"
                 )
         return scopes
 

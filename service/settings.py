@@ -35,6 +35,13 @@ class Settings(BaseSettings):
     #: default with room for a busy ground station (uploads come in batches of 10^3–10^5 rows).
     rate_limit_per_s: float = Field(default=200.0, ge=0)
     rate_limit_burst: int = Field(default=1000, ge=1)
+    #: Failed authentications (401 answers) allowed per client address [1/s] after a burst; an
+    #: address that exhausts them gets 429 on every request until its bucket refills (0: off).
+    auth_fail_per_s: float = Field(default=1.0, ge=0)
+    auth_fail_burst: int = Field(default=100, ge=1)
+    #: Redis URL of the buckets shared by every API process (``redis://host:6379/1``); empty:
+    #: buckets live in the process, right for the single-process default.
+    rate_limit_redis_url: str = ""
 
     #: Largest request body accepted [bytes]; larger ones get 413.
     max_body_bytes: int = 64 * 1024 * 1024
@@ -48,10 +55,19 @@ class Settings(BaseSettings):
     min_new_samples: int = 500  # scheduled retraining waits for this many new samples
     cadence_s: float = 3600.0  # per-spacecraft scheduled retraining cadence [s]
     scheduler_tick_s: float = 10.0  # how often the scheduler looks for due spacecraft [s]
-    #: Promotion margin: a challenger must beat the served RMS by this fraction (0 = strictly less).
-    promote_margin: float = 0.0
+    #: Promotion (``orbitcal.pipeline.decide_promotion``): a challenger must beat the served
+    #: held-out RMS by more than this fraction **and** the paired test must give p < alpha.
+    promote_margin: float = Field(default=0.01, ge=0.0, lt=1.0)
+    promote_alpha: float = Field(default=0.01, gt=0.0, le=1.0)
     #: A retraining lock older than this is considered abandoned (crashed worker) [s].
     lock_timeout_s: float = 1800.0
+    #: Quiet-time selection for retraining (orbitcal.auxdata.storm_mask): rows whose 3-hour Kp
+    #: exceeds quiet_kp_max or whose hourly Dst is below quiet_dst_min_nt [nT] are left out of the
+    #: fit and the comparison; None switches a criterion off (both off by default).
+    quiet_kp_max: float | None = None
+    quiet_dst_min_nt: float | None = None
+    #: The scheduler fetches the auxiliary tables (orbitcal data update) this often [s]; 0 = off.
+    aux_update_s: float = Field(default=0.0, ge=0)
 
     #: "inline": jobs run in a thread pool inside the API; "celery": jobs go to Celery workers.
     job_backend: Literal["inline", "celery"] = "inline"
@@ -67,5 +83,9 @@ class Settings(BaseSettings):
     key_cache_s: float = 5.0
     #: ``GET .../calibration`` answers are cached this long per spacecraft [s].
     read_cache_s: float = 1.0
+
+    #: API processes serving this deployment (``uvicorn --workers``). With more than one, the
+    #: rate limiter needs ``RATE_LIMIT_REDIS_URL`` (or is off), so that the limits hold in total.
+    workers: int = Field(default=1, ge=1)
 
     log_level: str = "INFO"

@@ -9,7 +9,7 @@ import sqlalchemy as sa
 from fastapi import APIRouter, Depends, HTTPException
 from fastapi.concurrency import run_in_threadpool
 
-from service import science
+from orbitcal.errors import OrbitcalError
 from service.auth import Principal, principal, require_scope
 from service.deps import EngineDep, get_spacecraft, iso
 from service.schemas import ErrorPublic, OrbitIn, SpacecraftIn, SpacecraftPublic
@@ -27,15 +27,25 @@ _ERRORS: dict[int | str, dict[str, Any]] = {
 
 
 def _check_orbit(tle: str | None, omm: dict[str, Any] | None) -> None:
+    """Parse and validate the orbit; the library's typed error (``OrbitProblemError``: malformed,
+    unphysical or decayed elements) propagates to the one handler in ``service.app`` (422), with
+    the body field named when the library did not name one."""
+    if tle is None and omm is None:
+        return
+    from orbitcal.orbit import Orbit
+
     try:
-        science.load_orbit(tle, omm)
-    except (ValueError, KeyError, TypeError) as exc:
-        field = "tle" if tle is not None else "omm"
-        raise HTTPException(
-            status_code=422,
-            detail=f"invalid {field}: {exc}",
-            headers={"X-Error-Field": field},
-        ) from None
+        if tle is not None:
+            Orbit.from_tle(tle)
+        else:
+            assert omm is not None
+            Orbit.from_omm(omm)
+    except OrbitcalError as exc:
+        part = "tle" if tle is not None else "omm"
+        inner = getattr(exc, "field", None)
+        # the body field, and inside it the element the library named: "omm.MEAN_MOTION"
+        exc.field = part if inner is None or part == "tle" else f"{part}.{inner}"  # type: ignore[attr-defined]
+        raise
 
 
 def _public(sc: Any, cal: Any) -> SpacecraftPublic:

@@ -88,6 +88,28 @@ ROUTES: list[Route] = [
     ("GET", "/v1/spacecraft/{spacecraft_id}/calibrations", READ, lambda ids: {}),
     ("GET", "/v1/spacecraft/{spacecraft_id}/calibration", READ, lambda ids: {}),
     ("GET", "/v1/spacecraft/{spacecraft_id}/residuals", READ, lambda ids: {}),
+    ("GET", "/v1/spacecraft/{spacecraft_id}/activity", READ, lambda ids: {}),
+    (
+        "POST",
+        "/v1/spacecraft/{spacecraft_id}/quarantines",
+        INGEST,
+        lambda ids: {"json": {"start": "2100-01-01T00:00:00Z", "end": "2100-01-02T00:00:00Z"}},
+    ),
+    ("GET", "/v1/spacecraft/{spacecraft_id}/quarantines", READ, lambda ids: {}),
+    (
+        "DELETE",
+        "/v1/spacecraft/{spacecraft_id}/quarantines/{quarantine_id}",
+        INGEST,
+        lambda ids: {},
+    ),
+    (
+        "DELETE",
+        "/v1/spacecraft/{spacecraft_id}/telemetry",
+        INGEST,
+        lambda ids: {"params": {"start": "2100-01-01T00:00:00Z", "end": "2100-01-02T00:00:00Z"}},
+    ),
+    ("GET", "/v1/spacecraft/{spacecraft_id}/data-audit", READ, lambda ids: {}),
+    ("GET", "/v1/spacecraft/{spacecraft_id}/diagnosis/report.html", READ, lambda ids: {}),
     ("GET", "/v1/spacecraft/{spacecraft_id}/diagnosis", READ, lambda ids: {}),
     ("GET", "/v1/jobs/{job_id}", READ, lambda ids: {}),
     ("POST", "/v1/keys", ADMIN, lambda ids: {"json": {"name": "m", "scopes": ["read:sat-1"]}}),
@@ -156,7 +178,12 @@ def test_scope_matrix_hashed_keys_and_no_secret_in_logs(
             listed = {k["name"]: k["prefix"] for k in admin.get("/v1/keys").json()}
             assert admin.delete(f"/v1/keys/{listed['revoked']}").status_code == 204
             job_id = admin.post("/v1/spacecraft/sat-1/calibrations").json()["job_id"]
-        ids = {"spacecraft_id": "sat-1", "job_id": job_id, "prefix": "ock_nosuchkey"}
+        ids = {
+            "spacecraft_id": "sat-1",
+            "job_id": job_id,
+            "prefix": "ock_nosuchkey",
+            "quarantine_id": "999999",
+        }
         matrix = _run_matrix(server, keys, ids)
     # Every documented operation is in the matrix.
     spec_ops = {(m.upper(), p) for p, ops in server.app.openapi()["paths"].items() for m in ops}
