@@ -1,11 +1,12 @@
 """Retraining jobs: creation (one live job per spacecraft), the job function, and its runners.
 
 The job function :func:`run_retrain` is the same for the in-process runner and for Celery workers.
-It fits a challenger on the spacecraft's sliding window, scores challenger and champion (the
-calibration in service) on the same held-out later block, and in one transaction stores the
-challenger as a new immutable version: ``in_service`` (the champion becomes ``superseded``) if it is
-better, ``rejected`` with the reason otherwise. Any failure leaves the served calibration untouched
-and is recorded on the job. A lock row per spacecraft keeps retrainings of one spacecraft serial.
+It reads the spacecraft's window (chosen robustly, quarantined rows left out), hands the science to
+:func:`orbitcal.pipeline.retrain` (fit the challenger, score challenger and champion on the same
+held-out later block, decide the promotion) and in one transaction stores the challenger as a new
+immutable version: ``in_service`` (the champion becomes ``superseded``) if promoted, ``rejected``
+with the reason otherwise. Any failure leaves the served calibration untouched and is recorded on
+the job. A lock row per spacecraft keeps retrainings of one spacecraft serial.
 """
 
 from __future__ import annotations
@@ -25,19 +26,17 @@ import sqlalchemy as sa
 from sqlalchemy.engine import Engine
 
 import orbitcal
-from orbitcal.calibrate.holdout import later_block_split
-from orbitcal.telemetry import Telemetry
+from orbitcal import pipeline
+from orbitcal.pipeline import TrainingRows, orbit_from, retrain, training_rows
 from orbitcal.timescales import utc_s_to_iso
-from service import science
 from service.settings import Settings
 from service.storage import (
     Calibration,
     Job,
-    SampleArrays,
     Spacecraft,
     acquire_lock,
-    read_samples,
     read_tx,
+    read_window,
     release_lock,
     write_tx,
 )
@@ -51,7 +50,6 @@ __all__ = [
     "reap_abandoned",
     "recover_interrupted",
     "run_retrain",
-    "samples_to_telemetry",
 ]
 
 log = logging.getLogger("orbitcal.service.jobs")
@@ -144,122 +142,63 @@ def create_job(
     return job_id, True
 
 
-def samples_to_telemetry(s: SampleArrays) -> Telemetry:
-    """Stored columns → ``Telemetry`` (an optional group is kept when every row has it)."""
-
-    def group(*names: str) -> np.ndarray | None:
-        block = np.stack([s.columns[c] for c in names], axis=-1)
-        return None if np.isnan(block).any() else block
-
-    q = group("q_w", "q_x", "q_y", "q_z")
-    r = group("r_x", "r_y", "r_z")
-    temp = group("temperature")
-    mtq = group("mtq_x", "mtq_y", "mtq_z")
-    hk = {k: v for k, v in s.hk.items() if not np.isnan(v).any()}
-    return Telemetry(
-        t_utc_s=s.t_utc_s,
-        b_raw_nt=group("b_x", "b_y", "b_z") if len(s) else np.zeros((0, 3)),  # type: ignore[arg-type]
-        q_wxyz=q,
-        r_itrs_km=r,
-        temperature_c=None if temp is None else temp[:, 0],
-        mtq_am2=mtq,
-        hk=hk,
+def _read_inputs(
+    engine: Engine, settings: Settings, params: dict[str, Any], sc: Any
+) -> tuple[Any, TrainingRows, Any, Any]:
+    """One read transaction: the robust window, its rows to fit (``pipeline.training_rows``)
+    and the champion."""
+    window_s = float(params.get("window_s") or settings.window_s)
+    min_samples = int(params.get("min_samples", settings.min_samples))
+    with read_tx(engine) as conn:
+        window, samples = read_window(
+            conn, sc.pk, window_s=window_s, min_samples=min_samples, now_utc_s=time.time()
+        )
+        champion = conn.execute(
+            sa.select(Calibration.version, Calibration.document).where(
+                Calibration.spacecraft_pk == sc.pk, Calibration.status == "in_service"
+            )
+        ).first()
+    rows = training_rows(
+        window,
+        samples.t_utc_s,
+        has_attitude=samples.has("q_w", "q_x", "q_y", "q_z"),
+        has_position=samples.has("r_x", "r_y", "r_z"),
+        method=str(params.get("method") or settings.method),
+        have_orbit=bool(sc.tle or sc.omm),
+        min_samples=min_samples,
+        spacecraft=sc.id,
+        quiet_kp_max=settings.quiet_kp_max,
+        quiet_dst_min_nt=settings.quiet_dst_min_nt,
     )
-
-
-def _subset(tel: Telemetry, sl: slice) -> Telemetry:
-    def cut(a: np.ndarray | None) -> np.ndarray | None:
-        return None if a is None else a[sl]
-
-    return Telemetry(
-        t_utc_s=tel.t_utc_s[sl],
-        b_raw_nt=tel.b_raw_nt[sl],
-        q_wxyz=cut(tel.q_wxyz),
-        r_itrs_km=cut(tel.r_itrs_km),
-        temperature_c=cut(tel.temperature_c),
-        mtq_am2=cut(tel.mtq_am2),
-        hk={k: v[sl] for k, v in tel.hk.items()},
-    )
-
-
-def _rms(b_cal: np.ndarray, b_ref: np.ndarray) -> float:
-    """RMS over samples and the three components of ``b_cal - b_ref`` [nT]."""
-    return float(np.sqrt(np.mean((b_cal - b_ref) ** 2)))
+    return samples.select(rows.mask).to_telemetry(), rows, window, champion
 
 
 def _retrain(
     engine: Engine, settings: Settings, job: Any, sc: Any, fit: FitFunction
 ) -> dict[str, Any]:
     params = dict(job.params)
-    window_s = float(params.get("window_s") or settings.window_s)
     method = str(params.get("method") or settings.method)
     field = str(params.get("field") or settings.reference_field)
     holdout_fraction = float(params.get("holdout_fraction", settings.holdout_fraction))
-    min_samples = int(params.get("min_samples", settings.min_samples))
-    with read_tx(engine) as conn:
-        latest_us = conn.execute(
-            sa.text("SELECT MAX(t_utc_us) FROM samples WHERE spacecraft_pk = :pk"),
-            {"pk": sc.pk},
-        ).scalar_one_or_none()
-        if latest_us is None:
-            raise ValueError(f"spacecraft {sc.id} has no telemetry yet")
-        latest_s = latest_us / 1e6
-        samples = read_samples(conn, sc.pk, start_utc_s=latest_s - window_s)
-        champion = conn.execute(
-            sa.select(Calibration.version, Calibration.document).where(
-                Calibration.spacecraft_pk == sc.pk, Calibration.status == "in_service"
-            )
-        ).first()
-    n = len(samples)
-    if n < min_samples:
-        raise ValueError(
-            f"only {n} samples in the {window_s:g} s window ending {utc_s_to_iso([latest_s])[0]}; "
-            f"a retraining needs at least {min_samples}"
-        )
-    telemetry = samples_to_telemetry(samples)
-    orbit = science.load_orbit(sc.tle, sc.omm)
-    rng = np.random.default_rng(int(params.get("seed", 0)))
-    document = fit(
+    telemetry, selection, window, champion = _read_inputs(engine, settings, params, sc)
+    outcome = retrain(
         telemetry,
-        orbit=orbit,
+        orbit=orbit_from(sc.tle, sc.omm),
+        champion=None if champion is None else champion.document,
+        champion_version=None if champion is None else champion.version,
         method=method,
         field=field,
         attitude_frame=sc.attitude_frame,
         holdout_fraction=holdout_fraction,
-        rng=rng,
+        rng=np.random.default_rng(int(params.get("seed", 0))),
+        fit=fit,
+        margin=settings.promote_margin,
+        alpha=settings.promote_alpha,
     )
-    # Score challenger and champion on the same later block that the fit did not see.
-    # (the same later-block split as the pipeline's; telemetry is time-ordered)
-    _train, hold_mask = later_block_split(telemetry.t_utc_s, holdout_fraction)
-    n_hold = int(np.count_nonzero(hold_mask))
-    if n_hold == 0:
-        raise ValueError("holdout_fraction leaves no held-out samples to compare calibrations on")
-    holdout = _subset(telemetry, slice(n - n_hold, n))
-    b_ref = science.reference_body_nt(
-        holdout, orbit=orbit, attitude_frame=sc.attitude_frame, field=field
-    )
-    challenger_rms = _rms(science.apply_document(document, holdout), b_ref)
-    champion_rms = (
-        None
-        if champion is None
-        else _rms(science.apply_document(champion.document, holdout), b_ref)
-    )
-    span = utc_s_to_iso([float(holdout.t_utc_s[0]), float(holdout.t_utc_s[-1])])
-    if champion_rms is None:
-        promote, reason = True, "first calibration of this spacecraft"
-    elif champion is not None and challenger_rms < champion_rms * (1.0 - settings.promote_margin):
-        promote = True
-        reason = (
-            f"held-out RMS {challenger_rms:.3f} nT beats version {champion.version}'s "
-            f"{champion_rms:.3f} nT on {span[0]}..{span[1]}"
-        )
-    else:
-        assert champion is not None
-        promote = False
-        reason = (
-            f"held-out RMS {challenger_rms:.3f} nT does not beat version {champion.version}'s "
-            f"{champion_rms:.3f} nT in service on {span[0]}..{span[1]}"
-        )
+    document, decision = outcome.document, outcome.promotion
+    rows = selection.summary(extra=outcome.excluded)
+    n = rows["used"]
+    span = utc_s_to_iso([outcome.holdout_start_utc_s, outcome.holdout_end_utc_s])
     provenance = {
         "job_id": job.id,
         "trigger": job.trigger,
@@ -268,20 +207,23 @@ def _retrain(
         "reference_field": document.get("reference_field", field),
         "attitude_frame": sc.attitude_frame,
         "orbit": "tle" if sc.tle else ("omm" if sc.omm else "telemetry positions"),
-        "window_s": window_s,
+        "window_s": float(params.get("window_s") or settings.window_s),
+        "window": {
+            "start": utc_s_to_iso([float(window.start_utc_s)])[0],
+            "end": utc_s_to_iso([float(window.end_utc_s)])[0],
+        },
         "data": {
             "start": utc_s_to_iso([float(telemetry.t_utc_s[0])])[0],
             "end": utc_s_to_iso([float(telemetry.t_utc_s[-1])])[0],
             "n": n,
         },
+        "rows": rows,
         "comparison": {
             "holdout_start": span[0],
             "holdout_end": span[1],
-            "holdout_n": n_hold,
-            "challenger_rms_nt": challenger_rms,
+            "holdout_n": outcome.n_holdout,
             "champion_version": None if champion is None else champion.version,
-            "champion_rms_nt": champion_rms,
-            "promoted": promote,
+            **decision.as_dict(),
         },
         "metrics": document.get("metrics", {}),
     }
@@ -301,7 +243,7 @@ def _retrain(
             "version": version,
             "created_at": document.get("created_at") or utc_s_to_iso([now])[0],
         }
-        if promote:
+        if decision.promote:
             conn.execute(
                 sa.update(Calibration)
                 .where(Calibration.spacecraft_pk == sc.pk, Calibration.status == "in_service")
@@ -311,21 +253,26 @@ def _retrain(
             sa.insert(Calibration).values(
                 spacecraft_pk=sc.pk,
                 version=version,
-                status="in_service" if promote else "rejected",
-                reason=reason,
+                status="in_service" if decision.promote else "rejected",
+                reason=decision.reason,
                 created_at=now,
                 job_id=job.id,
-                holdout_rms_nt=challenger_rms,
+                holdout_rms_nt=decision.challenger_rms_nt,
                 document=document,
                 provenance=provenance,
             )
         )
     return {
         "version": version,
-        "promoted": promote,
-        "reason": reason,
-        "holdout_rms_nt": challenger_rms,
-        "champion_rms_nt": champion_rms,
+        "promoted": decision.promote,
+        "reason": decision.reason,
+        "rule": decision.rule,
+        "method": provenance["method"],
+        "metric": decision.metric,
+        "holdout_rms_nt": decision.challenger_rms_nt,
+        "champion_rms_nt": decision.champion_rms_nt,
+        "p_value": decision.p_value,
+        "rows": rows,
     }
 
 
@@ -338,7 +285,7 @@ def run_retrain(
     on_done: Callable[[str, float], None] | None = None,
 ) -> str:
     """Run one retraining job to completion; return its final status. Idempotent on redelivery."""
-    fit = fit or science.fit_calibration
+    fit = fit or pipeline.fit_document  # looked up per call: tests may patch it
     with write_tx(engine) as conn:
         job = conn.execute(sa.select(Job).where(Job.id == job_id)).first()
         if job is None:

@@ -100,6 +100,24 @@ class FleetScheduler:
             log.info("scheduled retraining", extra={"jobs": submitted})
         return submitted
 
+    def update_tables(self) -> list[dict[str, object]]:
+        """Fetch and install the auxiliary tables (leap seconds, EOP, RC index, Kp, Dst).
+
+        A failed or malformed download keeps the installed table (orbitcal.auxdata.update); the
+        outcome per table is logged, never raised.
+        """
+        from orbitcal.auxdata import update
+
+        try:
+            results = update()
+        except Exception:
+            log.exception("auxiliary table update failed")
+            return []
+        for r in results:
+            level = logging.WARNING if r["status"] == "failed" else logging.INFO
+            log.log(level, "auxiliary table %s: %s (%s)", r["kind"], r["status"], r.get("reason"))
+        return results
+
     def start(self) -> None:
         self._scheduler.add_job(
             self.tick,
@@ -109,6 +127,15 @@ class FleetScheduler:
             max_instances=1,
             coalesce=True,
         )
+        if self.settings.aux_update_s > 0:  # off by default (issue 12): sites opt in
+            self._scheduler.add_job(
+                self.update_tables,
+                "interval",
+                seconds=self.settings.aux_update_s,
+                id="orbitcal-aux-update",
+                max_instances=1,
+                coalesce=True,
+            )
         self._scheduler.start()
 
     def shutdown(self) -> None:

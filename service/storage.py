@@ -17,7 +17,7 @@ import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from importlib import resources
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import sqlalchemy as sa
@@ -25,25 +25,37 @@ from sqlalchemy import event
 from sqlalchemy.engine import Connection, Engine
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
+if TYPE_CHECKING:
+    from orbitcal.telemetry import Telemetry
+
 __all__ = [
     "SAMPLE_COLUMNS",
     "ApiKey",
     "Base",
     "Calibration",
     "CommitOutcomeUnknown",
+    "DataAudit",
+    "IngestLog",
     "Job",
+    "Quarantine",
     "RetrainLock",
     "Sample",
     "SampleArrays",
     "Spacecraft",
     "acquire_lock",
+    "bump_data_revision",
+    "count_samples",
+    "delete_samples",
     "hash_key",
     "insert_samples",
+    "log_upload",
     "make_engine",
     "normalise_url",
     "read_samples",
     "read_tx",
+    "read_window",
     "release_lock",
+    "sample_times",
     "upgrade",
     "write_tx",
 ]
@@ -69,6 +81,11 @@ class Spacecraft(Base):
     #: ``sample_count`` when the last retraining job was created (scheduler's "new samples").
     samples_at_last_job: Mapped[int] = mapped_column(sa.BigInteger, nullable=False, default=0)
     last_job_at: Mapped[float | None] = mapped_column(sa.Float, nullable=True)
+    #: Bumped by :func:`bump_data_revision` whenever the stored samples change (ingest of new
+    #: rows, delete, quarantine, release): the key of every cached answer computed from them.
+    data_revision: Mapped[int] = mapped_column(
+        sa.BigInteger, nullable=False, default=0, server_default="0"
+    )
 
 
 class Sample(Base):
@@ -146,6 +163,49 @@ class RetrainLock(Base):
     acquired_at: Mapped[float] = mapped_column(sa.Float, nullable=False)
 
 
+class Quarantine(Base):
+    """A time range of one spacecraft's samples kept out of retraining and diagnosis.
+
+    Reversible: releasing sets ``released_at``/``released_by`` and the samples count again.
+    """
+
+    __tablename__ = "quarantines"
+
+    pk: Mapped[int] = mapped_column(sa.Integer, primary_key=True, autoincrement=True)
+    spacecraft_pk: Mapped[int] = mapped_column(
+        sa.Integer, sa.ForeignKey("spacecraft.pk", ondelete="CASCADE"), nullable=False, index=True
+    )
+    start_us: Mapped[int] = mapped_column(sa.BigInteger, nullable=False)  # UTC µs, inclusive
+    end_us: Mapped[int] = mapped_column(sa.BigInteger, nullable=False)  # UTC µs, inclusive
+    reason: Mapped[str] = mapped_column(sa.Text, nullable=False, default="")
+    created_by: Mapped[str] = mapped_column(sa.String(128), nullable=False)
+    created_at: Mapped[float] = mapped_column(sa.Float, nullable=False)
+    #: Samples in the range when it was quarantined.
+    n_samples: Mapped[int] = mapped_column(sa.BigInteger, nullable=False)
+    released_at: Mapped[float | None] = mapped_column(sa.Float)
+    released_by: Mapped[str | None] = mapped_column(sa.String(128))
+
+
+class DataAudit(Base):
+    """Who changed which stored samples, when: quarantine, release, delete (append-only)."""
+
+    __tablename__ = "data_audit"
+
+    pk: Mapped[int] = mapped_column(sa.Integer, primary_key=True, autoincrement=True)
+    spacecraft_pk: Mapped[int] = mapped_column(
+        sa.Integer, sa.ForeignKey("spacecraft.pk", ondelete="CASCADE"), nullable=False, index=True
+    )
+    #: quarantine | release | delete
+    action: Mapped[str] = mapped_column(sa.String(16), nullable=False)
+    start_us: Mapped[int] = mapped_column(sa.BigInteger, nullable=False)
+    end_us: Mapped[int] = mapped_column(sa.BigInteger, nullable=False)
+    n_samples: Mapped[int] = mapped_column(sa.BigInteger, nullable=False)
+    who: Mapped[str] = mapped_column(sa.String(128), nullable=False)
+    at: Mapped[float] = mapped_column(sa.Float, nullable=False)
+    quarantine_pk: Mapped[int | None] = mapped_column(sa.Integer)
+    reason: Mapped[str | None] = mapped_column(sa.Text)
+
+
 class ApiKey(Base):
     __tablename__ = "api_keys"
 
@@ -157,6 +217,51 @@ class ApiKey(Base):
     scopes: Mapped[list[str]] = mapped_column(sa.JSON, nullable=False)
     created_at: Mapped[float] = mapped_column(sa.Float, nullable=False)
     revoked: Mapped[bool] = mapped_column(sa.Boolean, nullable=False, default=False)
+
+
+class IngestLog(Base):
+    """One row per telemetry upload: how many rows it had accepted, duplicated and rejected."""
+
+    __tablename__ = "ingest_log"
+
+    pk: Mapped[int] = mapped_column(sa.Integer, primary_key=True, autoincrement=True)
+    spacecraft_pk: Mapped[int] = mapped_column(
+        sa.Integer, sa.ForeignKey("spacecraft.pk", ondelete="CASCADE"), nullable=False, index=True
+    )
+    received_at: Mapped[float] = mapped_column(sa.Float, nullable=False)
+    fmt: Mapped[str] = mapped_column(sa.String(16), nullable=False)
+    accepted: Mapped[int] = mapped_column(sa.BigInteger, nullable=False)
+    duplicates: Mapped[int] = mapped_column(sa.BigInteger, nullable=False)
+    rejected: Mapped[int] = mapped_column(sa.BigInteger, nullable=False)
+    #: The first few rejected rows: ``[{"row": i, "reason": "..."}]``.
+    examples: Mapped[list[dict[str, Any]] | None] = mapped_column(sa.JSON, nullable=True)
+
+
+#: Rejected rows kept as examples per upload in ``ingest_log``.
+INGEST_LOG_EXAMPLES = 5
+
+
+def log_upload(
+    conn: Connection,
+    spacecraft_pk: int,
+    *,
+    fmt: str,
+    accepted: int,
+    duplicates: int,
+    rejected: list[tuple[int, str]],
+) -> None:
+    """Record one upload in ``ingest_log`` (the dashboard's rejected-rows plot reads it)."""
+    conn.execute(
+        sa.insert(IngestLog).values(
+            spacecraft_pk=spacecraft_pk,
+            received_at=time.time(),
+            fmt=fmt,
+            accepted=accepted,
+            duplicates=duplicates,
+            rejected=len(rejected),
+            examples=[{"row": r, "reason": why} for r, why in rejected[:INGEST_LOG_EXAMPLES]],
+        )
+    )
 
 
 def hash_key(key: str) -> str:
@@ -279,12 +384,30 @@ def insert_samples(conn: Connection, spacecraft_pk: int, rows: Sequence[tuple[An
         cur.close()
     if inserted < 0:  # driver could not tell: count the stored rows of this batch instead
         raise RuntimeError("database driver did not report the inserted row count")
+    if inserted:
+        conn.execute(
+            sa.update(Spacecraft)
+            .where(Spacecraft.pk == spacecraft_pk)
+            .values(
+                sample_count=Spacecraft.sample_count + inserted,
+                data_revision=Spacecraft.data_revision + 1,
+            )
+        )
+    return inserted
+
+
+def bump_data_revision(conn: Connection, spacecraft_pk: int) -> None:
+    """Mark the spacecraft's stored samples as changed (inside the caller's write transaction).
+
+    Call it from every operation that changes which samples a computation would read —
+    :func:`insert_samples` does for new rows; deleting, quarantining or releasing samples must
+    too. Cached answers computed from the samples (the diagnosis) are keyed on the counter.
+    """
     conn.execute(
         sa.update(Spacecraft)
         .where(Spacecraft.pk == spacecraft_pk)
-        .values(sample_count=Spacecraft.sample_count + inserted)
+        .values(data_revision=Spacecraft.data_revision + 1)
     )
-    return inserted
 
 
 @dataclass(frozen=True)
@@ -298,6 +421,41 @@ class SampleArrays:
     def __len__(self) -> int:
         return int(self.t_utc_s.shape[0])
 
+    def has(self, *names: str) -> np.ndarray:
+        """``(N,)`` bool: rows where every one of the columns ``names`` is present."""
+        out = np.ones(len(self), dtype=bool)
+        for c in names:
+            out &= ~np.isnan(self.columns[c])
+        return out
+
+    def select(self, mask: np.ndarray) -> SampleArrays:
+        """The rows picked by a boolean mask (still time-ordered)."""
+        return SampleArrays(
+            self.t_utc_s[mask],
+            {k: v[mask] for k, v in self.columns.items()},
+            {k: v[mask] for k, v in self.hk.items()},
+        )
+
+    def to_telemetry(self) -> Telemetry:
+        """The rows as a :class:`~orbitcal.telemetry.Telemetry` (an optional group of columns is
+        kept when every row has it; choose rows first, e.g. with :meth:`has`)."""
+        from orbitcal.telemetry import Telemetry
+
+        def group(*names: str) -> np.ndarray | None:
+            block = np.stack([self.columns[c] for c in names], axis=-1)
+            return None if np.isnan(block).any() else block
+
+        temp = group("temperature")
+        return Telemetry(
+            t_utc_s=self.t_utc_s,
+            b_raw_nt=group("b_x", "b_y", "b_z") if len(self) else np.zeros((0, 3)),  # type: ignore[arg-type]
+            q_wxyz=group("q_w", "q_x", "q_y", "q_z"),
+            r_itrs_km=group("r_x", "r_y", "r_z"),
+            temperature_c=None if temp is None else temp[:, 0],
+            mtq_am2=group("mtq_x", "mtq_y", "mtq_z"),
+            hk={k: v for k, v in self.hk.items() if not np.isnan(v).any()},
+        )
+
 
 def read_samples(
     conn: Connection,
@@ -306,18 +464,16 @@ def read_samples(
     start_utc_s: float | None = None,
     end_utc_s: float | None = None,
     limit: int | None = None,
+    include_quarantined: bool = False,
 ) -> SampleArrays:
-    """Time-ordered samples in ``[start, end]`` (an index range scan on the primary key)."""
+    """Time-ordered samples in ``[start, end]`` (an index range scan on the primary key).
+
+    Samples in an active quarantine are left out unless ``include_quarantined``.
+    """
     cols = ", ".join(("t_utc_us", *SAMPLE_COLUMNS, "hk"))
     sql = f"SELECT {cols} FROM samples WHERE spacecraft_pk = :pk"
-    params: dict[str, Any] = {"pk": spacecraft_pk}
-    if start_utc_s is not None:
-        sql += " AND t_utc_us >= :start"
-        params["start"] = round(start_utc_s * 1e6)
-    if end_utc_s is not None:
-        sql += " AND t_utc_us <= :end"
-        params["end"] = round(end_utc_s * 1e6)
-    sql += " ORDER BY t_utc_us"
+    where, params = _range_sql(spacecraft_pk, start_utc_s, end_utc_s, include_quarantined)
+    sql += where + " ORDER BY t_utc_us"
     if limit is not None:
         sql += " LIMIT :limit"
         params["limit"] = int(limit)
@@ -339,6 +495,151 @@ def read_samples(
             with contextlib.suppress(TypeError, ValueError):
                 hk[name][i] = float(value)
     return SampleArrays(t, columns, hk)
+
+
+def _range_sql(
+    spacecraft_pk: int,
+    start_utc_s: float | None,
+    end_utc_s: float | None,
+    include_quarantined: bool,
+) -> tuple[str, dict[str, Any]]:
+    sql = ""
+    params: dict[str, Any] = {"pk": spacecraft_pk}
+    if start_utc_s is not None:
+        sql += " AND t_utc_us >= :start"
+        params["start"] = round(start_utc_s * 1e6)
+    if end_utc_s is not None:
+        sql += " AND t_utc_us <= :end"
+        params["end"] = round(end_utc_s * 1e6)
+    if not include_quarantined:
+        sql += (
+            " AND NOT EXISTS (SELECT 1 FROM quarantines q WHERE q.spacecraft_pk = :pk"
+            " AND q.released_at IS NULL AND samples.t_utc_us BETWEEN q.start_us AND q.end_us)"
+        )
+    return sql, params
+
+
+def sample_times(conn: Connection, spacecraft_pk: int) -> np.ndarray:
+    """Times of the spacecraft's samples outside active quarantines, ascending [s, POSIX UTC]."""
+    where, params = _range_sql(spacecraft_pk, None, None, False)
+    rows = conn.execute(
+        sa.text(f"SELECT t_utc_us FROM samples WHERE spacecraft_pk = :pk{where} ORDER BY t_utc_us"),
+        params,
+    ).scalars()
+    return np.fromiter(rows, dtype=np.int64).astype(np.float64) / 1e6
+
+
+def count_samples(
+    conn: Connection,
+    spacecraft_pk: int,
+    *,
+    start_utc_s: float | None = None,
+    end_utc_s: float | None = None,
+    include_quarantined: bool = True,
+) -> int:
+    """Samples stored in ``[start, end]`` (all, or only those outside active quarantines)."""
+    where, params = _range_sql(spacecraft_pk, start_utc_s, end_utc_s, include_quarantined)
+    return int(
+        conn.execute(
+            sa.text(f"SELECT COUNT(*) FROM samples WHERE spacecraft_pk = :pk{where}"), params
+        ).scalar_one()
+    )
+
+
+def _dense_latest_window(
+    conn: Connection, spacecraft_pk: int, window_s: float, min_samples: int, limit_utc_s: float
+) -> Any:
+    """The common case of :func:`orbitcal.pipeline.training_window` by index lookups alone: the
+    window ending at the latest sample not in the future, when it is dense (else None)."""
+    from orbitcal.pipeline import Window
+
+    where, params = _range_sql(spacecraft_pk, None, limit_utc_s, False)
+    latest_us = conn.execute(
+        sa.text(f"SELECT MAX(t_utc_us) FROM samples WHERE spacecraft_pk = :pk{where}"), params
+    ).scalar_one_or_none()
+    if latest_us is None:
+        return None
+    end = latest_us / 1e6
+    n = count_samples(
+        conn, spacecraft_pk, start_utc_s=end - window_s, end_utc_s=end, include_quarantined=False
+    )
+    if n < max(1, min_samples):
+        return None
+    where, params = _range_sql(spacecraft_pk, None, None, False)
+    params["limit"] = round(limit_utc_s * 1e6)
+    n_future = conn.execute(
+        sa.text(
+            f"SELECT COUNT(*) FROM samples WHERE spacecraft_pk = :pk AND t_utc_us > :limit{where}"
+        ),
+        params,
+    ).scalar_one()
+    return Window(end - window_s, end, n, {"future": int(n_future)} if n_future else {})
+
+
+def read_window(
+    conn: Connection,
+    spacecraft_pk: int,
+    *,
+    window_s: float,
+    min_samples: int,
+    now_utc_s: float,
+) -> tuple[Any, SampleArrays]:
+    """The recent window of samples outside quarantine, chosen robustly
+    (:func:`orbitcal.pipeline.training_window`): ``(window, samples)``.
+
+    ``window.excluded`` also counts the quarantined samples inside the window.
+    """
+    from orbitcal.pipeline import FUTURE_TOLERANCE_S, Window, training_window
+
+    window = _dense_latest_window(
+        conn, spacecraft_pk, window_s, min_samples, now_utc_s + FUTURE_TOLERANCE_S
+    )
+    if window is None:  # the latest stretch is sparse: scan every sample time
+        window = training_window(
+            sample_times(conn, spacecraft_pk),
+            window_s=window_s,
+            min_samples=min_samples,
+            now_utc_s=now_utc_s,
+        )
+    if window.end_utc_s is None:
+        return window, SampleArrays(np.zeros(0), {c: np.zeros(0) for c in SAMPLE_COLUMNS}, {})
+    samples = read_samples(
+        conn, spacecraft_pk, start_utc_s=window.start_utc_s, end_utc_s=window.end_utc_s
+    )
+    quarantined = count_samples(
+        conn, spacecraft_pk, start_utc_s=window.start_utc_s, end_utc_s=window.end_utc_s
+    ) - len(samples)
+    if quarantined:
+        window = Window(
+            window.start_utc_s,
+            window.end_utc_s,
+            window.n,
+            {**window.excluded, "quarantined": quarantined},
+        )
+    return window, samples
+
+
+def delete_samples(conn: Connection, spacecraft_pk: int, start_us: int, end_us: int) -> int:
+    """Delete the samples in ``[start_us, end_us]`` (quarantined or not); return how many.
+
+    Keeps ``sample_count`` and ``data_revision`` in step, inside the caller's transaction.
+    """
+    deleted = conn.execute(
+        sa.delete(Sample).where(
+            Sample.spacecraft_pk == spacecraft_pk,
+            Sample.t_utc_us >= start_us,
+            Sample.t_utc_us <= end_us,
+        )
+    ).rowcount
+    n = int(deleted or 0)
+    if n:
+        conn.execute(
+            sa.update(Spacecraft)
+            .where(Spacecraft.pk == spacecraft_pk)
+            .values(sample_count=Spacecraft.sample_count - n)
+        )
+    bump_data_revision(conn, spacecraft_pk)
+    return n
 
 
 # ---------------------------------------------------------------------------------------------

@@ -118,7 +118,7 @@ def test_scalar_method_without_attitude_and_vector_method_refuses(clean_world: O
     )
     _, doc = _fit(world, "twostep")
     assert doc["metrics"]["holdout_rms_nt"] < 1.08 * SIGMA_NT  # scalar residual at noise floor
-    assert "holdout_vector_rms_nt" not in doc["metrics"]
+    assert "holdout_norm_rms_nt" not in doc["metrics"]
     with pytest.raises(MissingAttitudeError, match="attitude"):
         _fit(world, "linear")
     with pytest.raises(UnknownMethodError, match="known"):

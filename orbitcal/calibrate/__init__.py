@@ -16,11 +16,10 @@ magnitude.
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Any
-
-import torch
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any
 
 from orbitcal.calibrate.base import AffineCalibration, Calibration, FitData
 from orbitcal.calibrate.errors import (
@@ -31,11 +30,11 @@ from orbitcal.calibrate.errors import (
     TooFewSamplesError,
     UnknownMethodError,
 )
-from orbitcal.calibrate.linear import fit_linear
-from orbitcal.calibrate.lm import LMOptions
-from orbitcal.calibrate.lmbp import LMBPCalibration, fit_lmbp
-from orbitcal.calibrate.online import fit_online
-from orbitcal.calibrate.scalar import fit_flann, fit_twostep
+
+if TYPE_CHECKING:  # imported on first use (torch takes ~1 s): see __getattr__
+    import torch
+
+    from orbitcal.calibrate.lmbp import LMBPCalibration
 
 __all__ = [
     "DEFAULT_METHOD",
@@ -58,15 +57,31 @@ __all__ = [
 ProgressCallback = Callable[[int, float], None]
 
 
+def _load(ref: str) -> Any:
+    """``"module:attribute"`` → the attribute, importing the module on first use."""
+    module, _, attribute = ref.partition(":")
+    return getattr(importlib.import_module(module), attribute)
+
+
 @dataclass(frozen=True)
 class MethodSpec:
-    """A registered calibrator: how to fit it and which class loads its documents."""
+    """A registered calibrator: how to fit it and which class loads its documents.
+
+    The registry names its implementations by ``"module:attribute"`` and imports them on first use,
+    so listing the methods (``orbitcal calibrate --help``) does not import torch.
+    """
 
     name: str
-    cls: type[Calibration]
+    cls_ref: str
     vector: bool
     description: str
     fit: Callable[..., Calibration]
+
+    @property
+    def cls(self) -> type[Calibration]:
+        """The class that loads this method's documents."""
+        cls: type[Calibration] = _load(self.cls_ref)
+        return cls
 
 
 def _fit_lmbp(use_hk: bool) -> Callable[..., Calibration]:
@@ -80,13 +95,15 @@ def _fit_lmbp(use_hk: bool) -> Callable[..., Calibration]:
         restarts: int | None = None,
         max_epochs: int = 200,
     ) -> Calibration:
+        from orbitcal.calibrate.lmbp import STOPPING, LMBPCalibration, fit_lmbp
+
         return fit_lmbp(
             data,
             n_hidden=n_hidden,
             use_hk=use_hk,
             restarts=restarts if restarts is not None else (1 if use_hk else 3),
             generator=generator,
-            options=LMOptions(max_epochs=max_epochs),
+            options=replace(STOPPING, max_epochs=max_epochs),
             warm_start=warm_start if isinstance(warm_start, LMBPCalibration) else None,
             callback=callback,
         )
@@ -94,64 +111,68 @@ def _fit_lmbp(use_hk: bool) -> Callable[..., Calibration]:
     return fit
 
 
-def _simple(fn: Callable[[FitData], Calibration]) -> Callable[..., Calibration]:
+def _simple(ref: str, **kwargs: Any) -> Callable[..., Calibration]:
     def fit(data: FitData, **_: Any) -> Calibration:
-        return fn(data)
+        calibration: Calibration = _load(ref)(data, **kwargs)
+        return calibration
 
     return fit
 
+
+_AFFINE = "orbitcal.calibrate.base:AffineCalibration"
+_LMBP = "orbitcal.calibrate.lmbp:LMBPCalibration"
 
 METHODS: dict[str, MethodSpec] = {
     spec.name: spec
     for spec in (
         MethodSpec(
             "linear",
-            AffineCalibration,
+            _AFFINE,
             True,
             "12-parameter vector least squares",
-            _simple(fit_linear),
+            _simple("orbitcal.calibrate.linear:fit_linear"),
         ),
         MethodSpec(
             "linear-hk",
-            AffineCalibration,
+            _AFFINE,
             True,
             "12-parameter vector least squares + housekeeping regressors",
-            _simple(lambda d: fit_linear(d, use_hk=True)),
+            _simple("orbitcal.calibrate.linear:fit_linear", use_hk=True),
         ),
         MethodSpec(
             "lmbp",
-            LMBPCalibration,
+            _LMBP,
             True,
             "Wang et al. 2020: 3-H-3 BP network trained by Levenberg-Marquardt",
             _fit_lmbp(False),
         ),
         MethodSpec(
             "lmbp-hk",
-            LMBPCalibration,
+            _LMBP,
             True,
             "LM-BP network with housekeeping inputs and a linear path",
             _fit_lmbp(True),
         ),
         MethodSpec(
             "twostep",
-            AffineCalibration,
+            _AFFINE,
             False,
             "TWOSTEP attitude-free scalar calibration (Alonso & Shuster 2002)",
-            _simple(fit_twostep),
+            _simple("orbitcal.calibrate.scalar:fit_twostep"),
         ),
         MethodSpec(
             "flann",
-            AffineCalibration,
+            _AFFINE,
             False,
             "FLANN scalar calibration, upper-triangular C + bias (Wu & Huang)",
-            _simple(fit_flann),
+            _simple("orbitcal.calibrate.scalar:fit_flann"),
         ),
         MethodSpec(
             "online",
-            AffineCalibration,
+            _AFFINE,
             False,
             "one-sample ellipsoid estimator (Chen, patent)",
-            _simple(fit_online),
+            _simple("orbitcal.calibrate.online:fit_online"),
         ),
     )
 }
@@ -192,3 +213,10 @@ def fit_method(
     if spec.vector and data.b_ref_body_nt is None:
         raise MissingAttitudeError(name)
     return spec.fit(data, generator=generator, callback=callback, **options)
+
+
+def __getattr__(name: str) -> Any:
+    """``LMBPCalibration`` is imported on first use (it needs torch)."""
+    if name == "LMBPCalibration":
+        return _load(_LMBP)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -58,14 +58,29 @@ def calibration_to_document(
     n_samples: int,
     metrics: dict[str, float],
     created_at: str | None = None,
+    provenance: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Build the section-4 document for a fitted calibration.
 
     ``metrics`` must contain ``holdout_rms_nt`` [nT]; ``created_at`` defaults to now (UTC).
+    ``provenance`` (default: computed by :func:`orbitcal.auxdata.tables_provenance` over the data
+    span) names the leap-second, EOP and RC tables behind the reference field and the reference
+    model's generation, and warns when the data run past a table's end; it is an extra key beside
+    those of CONTRACT section 4.
     """
     if "holdout_rms_nt" not in metrics:
         raise ValueError("metrics must contain holdout_rms_nt")
     M, o = cal.linear()
+    if provenance is None:
+        from orbitcal.auxdata import tables_provenance
+
+        provenance = tables_provenance(
+            [float(t_start_utc_s), float(t_end_utc_s)],
+            reference_field=reference_field,
+            kinds=("leap_seconds", "eop", "rc_index")
+            if "RC" in reference_field.replace(" ", "").split("+")
+            else ("leap_seconds", "eop"),
+        )
     return {
         "spacecraft": spacecraft,
         "version": int(version),
@@ -81,6 +96,7 @@ def calibration_to_document(
         "metrics": {k: float(v) for k, v in metrics.items()},
         "linear": {"M": np.asarray(M).tolist(), "o": np.asarray(o).tolist()},
         "model": cal.to_model(),
+        "provenance": provenance,
     }
 
 

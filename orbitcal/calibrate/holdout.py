@@ -42,6 +42,7 @@ def later_block_split(
 
 
 def rms_nt(residual_nt: NDArray[np.float64]) -> float:
-    """Root mean square over all samples and components [nT]."""
-    r = np.asarray(residual_nt, dtype=np.float64)
-    return float(np.sqrt(np.mean(r**2))) if r.size else float("nan")
+    """Root mean square over all samples and components [nT] (:func:`orbitcal.metrics.rms_nt`)."""
+    from orbitcal.metrics import rms_nt as rms
+
+    return rms(residual_nt)

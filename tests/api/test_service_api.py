@@ -317,7 +317,7 @@ def test_orbit_is_set_by_tle_or_omm_and_validated(server: LiveServer) -> None:
         assert r.status_code == 422 and r.json()["errors"][0]["field"] == "tle"
         assert "checksum" in r.json()["detail"].lower()
         r = c.put("/v1/spacecraft/sat-1/orbit", json={"omm": {"EPOCH": "x"}})
-        assert r.status_code == 422 and r.json()["errors"][0]["field"] == "omm"
+        assert r.status_code == 422 and r.json()["errors"][0]["field"].startswith("omm.")
         r = c.put("/v1/spacecraft/sat-1/orbit", json={})
         assert r.status_code == 422
         r = c.put("/v1/spacecraft/nope/orbit", json={"tle": SWARM_A_TLE})

@@ -124,7 +124,7 @@ def test_restart_fails_interrupted_jobs_releases_locks_and_runs_queued_ones(
         assert interrupted["status"] == "failed" and "interrupted" in interrupted["error"]
         # the queued job ran (and failed cleanly: this spacecraft has no data), lock released
         queued = wait_job(c, "b" * 32)
-        assert queued["status"] == "failed" and "no telemetry" in queued["error"]
+        assert queued["status"] == "failed" and "no usable telemetry" in queued["error"]
         with server.app.state.engine.connect() as conn:
             assert conn.execute(sa.select(sa.func.count()).select_from(RetrainLock)).scalar() == 0
 

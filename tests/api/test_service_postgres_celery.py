@@ -31,7 +31,7 @@ from service_helpers import (
 )
 from service_worlds import SENSOR_A, SENSOR_B, SWARM_A_TLE, T0_UTC_S, world
 
-from service import science
+from orbitcal.calibrate.document import calibration_from_document
 from service.settings import Settings
 from service.storage import insert_samples, make_engine, upgrade, write_tx
 
@@ -125,7 +125,10 @@ def test_end_to_end_on_postgresql_with_celery(broker: str, tmp_path: Path) -> No
             held, b_body = world(T0_UTC_S + 86400, 1500, sensor=SENSOR_A, seed=11)
             rms = np.sqrt(
                 np.mean(
-                    (science.apply_linear(doc, held[["b_x", "b_y", "b_z"]].to_numpy()) - b_body)
+                    (
+                        calibration_from_document(doc).apply(held[["b_x", "b_y", "b_z"]].to_numpy())
+                        - b_body
+                    )
                     ** 2
                 )
             )
@@ -150,7 +153,12 @@ def test_end_to_end_on_postgresql_with_celery(broker: str, tmp_path: Path) -> No
             held, b_body = world(T0_UTC_S + 86400, 1500, sensor=SENSOR_B, seed=12)
             rms2 = np.sqrt(
                 np.mean(
-                    (science.apply_linear(doc2, held[["b_x", "b_y", "b_z"]].to_numpy()) - b_body)
+                    (
+                        calibration_from_document(doc2).apply(
+                            held[["b_x", "b_y", "b_z"]].to_numpy()
+                        )
+                        - b_body
+                    )
                     ** 2
                 )
             )

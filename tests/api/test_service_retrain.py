@@ -20,7 +20,7 @@ from service_helpers import (
 )
 from service_worlds import SENSOR_A, SENSOR_B, SWARM_A_TLE, T0_UTC_S, Sensor, document_for, world
 
-from service import science
+from orbitcal.calibrate.document import calibration_from_document
 
 DAY_S = 86400.0
 N_DAY = 8640  # one day at 0.1 Hz
@@ -42,7 +42,7 @@ def _heldout_rms(doc: dict[str, Any], start: float, n: int, sensor: Sensor, seed
     """RMS [nT] of the document's ``linear`` on fresh data no fit saw (later than the uploads)."""
     df, b_body = world(start, n, sensor=sensor, seed=seed)
     b_raw = df[["b_x", "b_y", "b_z"]].to_numpy()
-    return float(np.sqrt(np.mean((science.apply_linear(doc, b_raw) - b_body) ** 2)))
+    return float(np.sqrt(np.mean((calibration_from_document(doc).apply(b_raw) - b_body) ** 2)))
 
 
 def _register(c: Any, sc: str, **extra: Any) -> None:
