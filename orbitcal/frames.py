@@ -5,9 +5,10 @@ Conventions
 * Vectors are arrays of shape ``(N, 3)`` (a single ``(3,)`` broadcasts); times are ``t_utc_s``,
   POSIX seconds of UTC, shape ``(N,)`` (see :mod:`orbitcal.timescales`).
 * ``M = gcrs_to_itrs_matrix(t)`` gives ``r_itrs = M @ r_gcrs``. It is Skyfield's
-  ``framelib.itrs.rotation_at(t)`` (IAU 2006 precession, IAU 2000A nutation, UT1 from Skyfield's
-  builtin IERS table, polar motion when the timescale carries a table — the builtin one does not,
-  so W = I), computed fast: written in the CIO form of IERS Conventions 2010 eq. 5.1,
+  ``framelib.itrs.rotation_at(t)`` (IAU 2006 precession, IAU 2000A nutation, UT1 − UTC and polar
+  motion from the EOP table in use, :func:`orbitcal.timescales.skyfield_timescale`: an installed
+  IERS finals2000A gives both, the shipped fallback — Skyfield's builtin table — UT1 − UTC only,
+  so W = I there), computed fast: written in the CIO form of IERS Conventions 2010 eq. 5.1,
   ``M = W · R3(ERA) · C``, where ``C = R3(ERA − GAST) · N · P · B`` is GCRS → CIRS. The slow parts
   ``C`` and ``W`` (and ΔT = TT − UT1) come from Skyfield on a coarse grid (``step_s``, 1 h by
   default) and are interpolated linearly; the Earth rotation angle (IAU 2000 Resolution B1.8) is
@@ -33,7 +34,7 @@ from collections import OrderedDict
 import numpy as np
 import numpy.typing as npt
 
-from orbitcal.timescales import skyfield_timescale, tai_minus_utc_s
+from orbitcal.timescales import skyfield_timescale, tables_epoch, tai_minus_utc_s
 
 __all__ = [
     "OMEGA_EARTH_RAD_S",
@@ -184,7 +185,7 @@ def _grid_nodes(
     return c, w, delta_t_s
 
 
-_GRID_CACHE: OrderedDict[tuple[float, bytes], tuple[FloatArray, FloatArray, FloatArray]] = (
+_GRID_CACHE: OrderedDict[tuple[float, int, bytes], tuple[FloatArray, FloatArray, FloatArray]] = (
     OrderedDict()
 )
 _GRID_CACHE_SIZE = 8
@@ -194,7 +195,8 @@ def _grid_cached(
     k: npt.NDArray[np.int64], step_s: float
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """:func:`_grid_nodes` with a small LRU cache keyed by the node set (repeat calls are free)."""
-    key = (step_s, hashlib.sha1(k.tobytes()).digest())
+    # The timescale is rebuilt when the EOP or leap-second table changes (orbitcal data update).
+    key = (step_s, tables_epoch(), hashlib.sha1(k.tobytes()).digest())
     with _GRID_LOCK:
         hit = _GRID_CACHE.get(key)
         if hit is not None:

@@ -16,6 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from orbitcal.attitude import frame_to_body
+from orbitcal.errors import BadInputError
 from orbitcal.field import DEFAULT_FIELD, FieldModel, get_field
 from orbitcal.frames import itrs_to_gcrs, itrs_to_spherical, nec_to_itrs
 from orbitcal.orbit import Propagator, require_valid
@@ -179,6 +180,10 @@ class Truth:
         Frame of the quaternions used for ``b_body_nt``.
     position_source : str
         ``"telemetry"`` (the table's ``r_x, r_y, r_z``) or ``"sgp4"``.
+    eop_status : str
+        How UT1 − UTC and polar motion entered the frames over the span (``observed``,
+        ``predicted`` — Bulletin A predictions, the only values yet for those dates — or
+        ``past_end``, extrapolated), from :func:`orbitcal.auxdata.table_status`.
     """
 
     t_utc_s: FloatArray
@@ -189,6 +194,16 @@ class Truth:
     field_name: str
     attitude_frame: str
     position_source: str
+    eop_status: str = "observed"
+
+
+def _eop_status(t: FloatArray) -> str:
+    from orbitcal.auxdata import table_status
+
+    finite = t[np.isfinite(t)]
+    if finite.size == 0:
+        return "observed"
+    return str(table_status("eop", float(finite.min()), float(finite.max()))["status"])
 
 
 def _positions_from_orbit(orbit: Propagator, t: FloatArray) -> FloatArray:
@@ -243,8 +258,9 @@ def truth_for_telemetry(
         r = _positions_from_orbit(orbit, t)
         source = "sgp4"
     else:
-        raise ValueError(
-            "the telemetry has no positions (r_x, r_y, r_z): give the spacecraft's TLE (--tle)"
+        raise BadInputError(
+            "the telemetry has no positions (r_x, r_y, r_z): give the spacecraft's TLE (--tle)",
+            field="r_x",
         )
     b_nec = reference_field_nec_nt(t, r, field=model)
     b_itrs = nec_to_itrs(b_nec, r)
@@ -260,4 +276,5 @@ def truth_for_telemetry(
         field_name=model.name,
         attitude_frame=frame,
         position_source=source,
+        eop_status=_eop_status(t),
     )

@@ -9,6 +9,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
+from orbitcal.errors import OutOfRangeError
 from orbitcal.field._kernel import HAVE_NUMBA, synth_pp_nec_nt
 from orbitcal.field.synthesis import n_block_coeffs, synth_internal_nec_nt, to_degree_blocks
 
@@ -85,7 +86,7 @@ def _use_numba(backend: str) -> bool:
     return HAVE_NUMBA and os.environ.get("ORBITCAL_FIELD_BACKEND", "").lower() != "numpy"
 
 
-class FieldRangeError(ValueError):
+class FieldRangeError(OutOfRangeError):
     """A sample time lies outside the validity of a field model.
 
     Raised with the model name, the first offending date and the valid range; choose another

@@ -11,8 +11,9 @@ the terms that carry all but a few nT of it at LEO:
 
 Left out, each ≲ 2 nT at LEO: the CHAOS 30-day baseline corrections Δq10, Δq11, Δs11, the degree-2
 SM and GSM terms, and the induced part of the GSM term. ``RC_e``/``RC_i`` are the hourly external
-and internal parts of the RC index shipped with ChaosMagPy (``chaosmagpy/lib/RC_index.h5``),
-linearly interpolated as ChaosMagPy does; the model is valid over the index file's time span.
+and internal parts of the RC index (DTU's file as installed by ``orbitcal data update``, else the
+one shipped with ChaosMagPy, ``chaosmagpy/lib/RC_index.h5``), linearly interpolated as ChaosMagPy
+does; the model is valid over the index file's time span.
 
 Frames: SM has z along the northern dipole pole (the centred dipole of ChaosMagPy's
 ``params.dipole``) and the Sun in its x–z plane; GSM has x towards the Sun and the dipole in its
@@ -27,11 +28,15 @@ from functools import lru_cache
 from importlib import resources
 from pathlib import Path
 
-import h5py
 import numpy as np
 from numpy.typing import NDArray
 
-from orbitcal.field._base import _broadcast_samples, require_in_range, utc_s_to_mjd2000
+from orbitcal.field._base import (
+    FieldRangeError,
+    _broadcast_samples,
+    require_in_range,
+    utc_s_to_mjd2000,
+)
 from orbitcal.field.synthesis import synth_internal_nec_nt
 
 __all__ = [
@@ -63,7 +68,8 @@ _JD_UNIX_EPOCH = 2440587.5  # Julian date of 1970-01-01T00:00 UTC
 
 
 def rc_index_path() -> Path:
-    """The RC-index file shipped with ChaosMagPy."""
+    """The RC-index file shipped with ChaosMagPy (the fallback; the table in use comes from
+    :func:`orbitcal.auxdata.active_table`)."""
     return Path(str(resources.files("chaosmagpy").joinpath("lib", "RC_index.h5")))
 
 
@@ -179,12 +185,23 @@ class RingCurrentField:
         return "RingCurrentField('RC')"
 
 
-@lru_cache(maxsize=1)
+@lru_cache(maxsize=2)
+def _rc_field(sha256: str) -> RingCurrentField:
+    from orbitcal.auxdata.tables import active_table
+
+    table = active_table("rc_index")
+    if table is None or table.sha256 != sha256:  # pragma: no cover - changed between calls
+        raise FieldRangeError("the RC index changed while loading; try again")
+    d = table.parsed.data
+    return RingCurrentField(d["time_mjd2000"], d["rc_e_nt"], d["rc_i_nt"])
+
+
 def ring_current_field() -> RingCurrentField:
-    """The RC-driven field with ChaosMagPy's RC index, loaded once."""
-    with h5py.File(rc_index_path(), "r") as f:
-        time = np.asarray(f["time"][:], dtype=np.float64)
-        rc_e = np.asarray(f["RC_e"][:], dtype=np.float64)
-        rc_i = np.asarray(f["RC_i"][:], dtype=np.float64)
-    ok = np.isfinite(time) & np.isfinite(rc_e) & np.isfinite(rc_i)
-    return RingCurrentField(time[ok], rc_e[ok], rc_i[ok])
+    """The RC-driven field with the RC index in use (:mod:`orbitcal.auxdata`: an installed DTU
+    file or, as fallback, the one shipped with ChaosMagPy), loaded once per file."""
+    from orbitcal.auxdata.tables import active_table
+
+    table = active_table("rc_index")
+    if table is None:  # pragma: no cover - ChaosMagPy ships one
+        raise FieldRangeError("no RC index installed: run 'orbitcal data update'")
+    return _rc_field(table.sha256)
