@@ -15,14 +15,7 @@ from orbitcal.diagnose.api import diagnose_parts
 from orbitcal.diagnose.attribution import split_fit_tests
 from orbitcal.diagnose.report import report_html
 
-
-@pytest.fixture(autouse=True)
-def _single_thread_blas():  # type: ignore[no-untyped-def]
-    """Tiny least-squares fits: BLAS threads only contend on a shared 2-core machine."""
-    from threadpoolctl import threadpool_limits
-
-    with threadpool_limits(1):
-        yield
+pytestmark = pytest.mark.usefixtures("single_thread_blas")  # tests/conftest.py
 
 
 CONTRACT_EFFECTS = {
@@ -160,6 +153,15 @@ def test_report_has_the_contract_keys_and_html_renders() -> None:
         assert e["shrink"] == pytest.approx(
             e["holdout_rms_before_nt"] / e["holdout_rms_after_nt"], rel=1e-3
         )
+        assert e["status"] in {"selected", "not significant", "implausible"}
+        assert (e["status"] == "implausible") == bool(e["implausible_reason"])
+        if e["name"] != "field_aligned_currents" or e["param_intervals_90"]:
+            for name, (lo, hi) in e["param_intervals_90"].items():
+                assert lo <= e["params"][name] <= hi
+    top = report["effects"][0]
+    lo, hi = top["shrink_interval_90"]
+    assert lo <= top["shrink"] <= hi
+    assert 0.8 <= report["verdict_confidence"] <= 1.0 and report["verdict_status"] == "firm"
     where = report["where"]
     assert len(where["axis_rms_nt"]) == 3
     assert {"magnetic_latitude", "local_time", "orbit_phase", "time"} <= set(where)
@@ -167,14 +169,14 @@ def test_report_has_the_contract_keys_and_html_renders() -> None:
     assert report["learned"]["legendre_order"] == 3 and report["learned"]["hidden_nodes"] == 6
     page = report_html(report, data=world.data, attribution=att)
     assert page.count("data:image/png;base64,") >= 4
+    assert "90 % interval" in page and "confidence" in page
 
 
-def test_cli_diagnose_end_to_end(tmp_path: Path) -> None:
+def test_cli_diagnose_end_to_end(tmp_path: Path, real_tles_text: str) -> None:
     from orbitcal.cli import main
     from orbitcal.simulate import Tumbling, make_effect, select_tle, simulate_world
 
-    tle_text = (Path(__file__).parent / "authorities" / "swarm_iss_real_tles.tle").read_text()
-    tle = select_tle(tle_text, norad_id=39452, at_utc_s=1.69e9)
+    tle = select_tle(real_tles_text, norad_id=39452, at_utc_s=1.69e9)
     world = simulate_world(
         tle,
         start_utc_s=tle.epoch_utc_s + 3600.0,
@@ -214,7 +216,7 @@ def test_cli_diagnose_rejects_missing_tle(tmp_path: Path) -> None:
     assert main(["diagnose", str(table), "--out", str(tmp_path / "r.json")]) == 2
 
 
-def test_reduced_blind_benchmark() -> None:
+def test_reduced_blind_benchmark(real_tles_text: str) -> None:
     """24 blind cases (every class twice: nadir and tumbling, default magnitude): the full run of
     >= 200 cases is ``orbitcal bench diagnose`` (benchmarks/results/diagnose.md)."""
     from orbitcal.diagnose.bench import (
@@ -225,7 +227,6 @@ def test_reduced_blind_benchmark() -> None:
         summarise,
     )
 
-    tle_text = (Path(__file__).parent / "authorities" / "swarm_iss_real_tles.tle").read_text()
     rng = np.random.default_rng(2024)
     cases = [
         BenchCase(
@@ -242,7 +243,7 @@ def test_reduced_blind_benchmark() -> None:
             (e, a) for e in BENCH_CLASSES for a in ("nadir", "tumbling")
         )
     ]
-    results = [run_case(c, tle_text=tle_text, n_orbits=4.0, cadence_s=10.0) for c in cases]
+    results = [run_case(c, tle_text=real_tles_text, n_orbits=4.0, cadence_s=10.0) for c in cases]
     summary = summarise(results)
     assert summary["cases"] == 24
     assert summary["false_alarm_rate"] == 0.0
@@ -260,14 +261,13 @@ def test_reduced_blind_benchmark() -> None:
             assert r["perfect_shrink"] < 1.03
 
 
-def test_public_diagnose_on_telemetry() -> None:
+def test_public_diagnose_on_telemetry(real_tles_text: str) -> None:
     """``diagnose(telemetry, orbit=...)``: the call behind GET /v1/spacecraft/{id}/diagnosis."""
     from orbitcal.diagnose import diagnose
     from orbitcal.orbit import Orbit
     from orbitcal.simulate import NadirLVLH, make_effect, select_tle, simulate_world
 
-    tle_text = (Path(__file__).parent / "authorities" / "swarm_iss_real_tles.tle").read_text()
-    tle = select_tle(tle_text, norad_id=39451, at_utc_s=1.66e9)
+    tle = select_tle(real_tles_text, norad_id=39451, at_utc_s=1.66e9)
     world = simulate_world(
         tle,
         start_utc_s=tle.epoch_utc_s + 7200.0,
@@ -283,7 +283,7 @@ def test_public_diagnose_on_telemetry() -> None:
     assert report["effects"][0]["holdout_rms_after_nt"] < report["baseline"]["holdout_rms_nt"]
 
 
-def test_cli_diagnose_with_the_calibration_in_service(tmp_path: Path) -> None:
+def test_cli_diagnose_with_the_calibration_in_service(tmp_path: Path, real_tles_text: str) -> None:
     """``--calibration CAL.json``: a quiet-day calibration of the same sensor is the prior.
 
     A 50-minute span with a -150 nT storm-time ring current: the report names the prior it used
@@ -293,8 +293,7 @@ def test_cli_diagnose_with_the_calibration_in_service(tmp_path: Path) -> None:
     from orbitcal.sensor import SensorModel
     from orbitcal.simulate import Tumbling, make_effect, select_tle, simulate_world
 
-    tle_text = (Path(__file__).parent / "authorities" / "swarm_iss_real_tles.tle").read_text()
-    tle = select_tle(tle_text, norad_id=39452, at_utc_s=1.69e9)
+    tle = select_tle(real_tles_text, norad_id=39452, at_utc_s=1.69e9)
     rng = np.random.default_rng(3)
     sensor = SensorModel(
         a_matrix=np.eye(3) + rng.normal(scale=0.01, size=(3, 3)),
@@ -393,3 +392,38 @@ def test_prior_decides_only_what_the_data_cannot() -> None:
     d_free = np.linalg.norm(free_short.o_nt - off.o_nt)
     print(f"offsets from the prior: {d_held:.2f} nT with it, {d_free:.1f} nT without")
     assert d_held < 0.2 * d_free
+
+
+def test_a_candidate_that_needs_an_unphysical_value_is_implausible() -> None:
+    """A crustal model offered upside down: the free fit wants crust_scale ~ -1 (a published
+    model is never negative), so the candidate is reported implausible and not named."""
+    world = make_world("crustal_field", attitude="tumbling", seed=3)
+    flipped = dataclasses.replace(world.data, b_crust_body_nt=-world.data.b_crust_body_nt)
+    att = attribute(flipped, split_tests=False)
+    assert att.verdict != "crustal_field"
+    crust = {e.name: e for e in att.effects}["crustal_field"]
+    assert crust.implausible is not None and "crust_scale" in crust.implausible
+    assert not crust.significant
+    # The same world with the model the right way up: named, amplitude near 1, with an interval.
+    att = attribute(world.data, split_tests=False)
+    assert att.verdict == "crustal_field" and not att.implausible.get("crustal_field")
+    lo, hi = att.effects[0].intervals["crust_scale"]
+    assert lo <= att.effects[0].params["crust_scale"] <= hi
+    assert lo > 0.5 and hi < 1.5
+
+
+def test_bounded_fit_stays_in_range() -> None:
+    from orbitcal.diagnose.attribution import fit_joint, time_blocks
+    from orbitcal.diagnose.bounds import param_range
+    from orbitcal.diagnose.effects import get_effect
+
+    data = make_world("parameter_drift", magnitude=5.0, attitude="tumbling", seed=3).data
+    train, _, _ = time_blocks(data.t_utc_s)
+    block = get_effect("parameter_drift").design(data, train)
+    assert block is not None
+    free = fit_joint(data, train, [block], bounded=False)
+    held = fit_joint(data, train, [block])
+    # 300 nT/day injected on x: beyond the 100 nT/day a fluxgate offset drifts at most.
+    assert free.coef[0][0] > 150.0
+    assert held.coef[0][0] == pytest.approx(param_range(block.names[0]).upper)
+    assert held.at_bounds(0)[0] == block.names[0]

@@ -16,13 +16,7 @@ import pytest
 from orbitcal.diagnose.learned import sh_design_nec
 from orbitcal.field.synthesis import synth_internal_nec_nt, to_degree_blocks
 
-
-@pytest.fixture(autouse=True)
-def _single_thread_blas():  # type: ignore[no-untyped-def]
-    from threadpoolctl import threadpool_limits
-
-    with threadpool_limits(1):
-        yield
+pytestmark = pytest.mark.usefixtures("single_thread_blas")  # tests/conftest.py
 
 
 @pytest.mark.parametrize("nmax", [1, 2, 13, 40])

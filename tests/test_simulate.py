@@ -47,8 +47,8 @@ CONTRACT_EFFECTS = {
 
 
 @pytest.fixture(scope="module")
-def tle_text(authorities: Path) -> str:
-    return (authorities / "swarm_iss_real_tles.tle").read_text()
+def tle_text(real_tles_text: str) -> str:
+    return real_tles_text  # tests/conftest.py
 
 
 @pytest.fixture(scope="module")

@@ -54,10 +54,10 @@ def storm(authorities: Path) -> dict[str, np.ndarray]:
 
 
 @pytest.fixture(scope="module")
-def chaos7(shared_data: Path) -> chaosmagpy.CHAOS:
+def chaos7(authorities: Path) -> chaosmagpy.CHAOS:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return chaosmagpy.load_CHAOS_matfile(str(shared_data / "models" / "CHAOS-7.mat"))
+        return chaosmagpy.load_CHAOS_matfile(str(authorities / "CHAOS-7.mat"))
 
 
 def _low_lat_mean(storm: dict[str, np.ndarray], model: np.ndarray) -> np.ndarray:

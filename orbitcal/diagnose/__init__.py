@@ -6,10 +6,29 @@ engine underneath works on plain arrays (:class:`DiagnosisData`, :func:`attribut
 
 from __future__ import annotations
 
-from orbitcal.diagnose.api import diagnose, diagnose_data, diagnosis_data
-from orbitcal.diagnose.attribution import Attribution, EffectScore, SplitFit, attribute
-from orbitcal.diagnose.effects import CATALOGUE, EFFECT_NAMES, DiagnosisData, Effect
-from orbitcal.diagnose.report import build_report, report_html
+from typing import TYPE_CHECKING
+
+from orbitcal._lazy import lazy_exports
+
+if TYPE_CHECKING:
+    from orbitcal.diagnose.api import diagnose, diagnose_data, diagnosis_data
+    from orbitcal.diagnose.attribution import Attribution, EffectScore, SplitFit, attribute
+    from orbitcal.diagnose.effects import CATALOGUE, EFFECT_NAMES, DiagnosisData, Effect
+    from orbitcal.diagnose.report import build_report, report_html
+
+# Imported on first access (scipy and the engine are heavy; ``orbitcal diagnose --help`` needs
+# only ``orbitcal.diagnose.prior``).
+_EXPORTS = {
+    **dict.fromkeys(("diagnose", "diagnose_data", "diagnosis_data"), "orbitcal.diagnose.api"),
+    **dict.fromkeys(
+        ("Attribution", "EffectScore", "SplitFit", "attribute"), "orbitcal.diagnose.attribution"
+    ),
+    **dict.fromkeys(
+        ("CATALOGUE", "EFFECT_NAMES", "DiagnosisData", "Effect"), "orbitcal.diagnose.effects"
+    ),
+    **dict.fromkeys(("build_report", "report_html"), "orbitcal.diagnose.report"),
+}
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
 
 __all__ = [
     "CATALOGUE",

@@ -21,6 +21,7 @@ from orbitcal.diagnose.effects import DiagnosisData
 from orbitcal.diagnose.prior import CalibrationPrior
 from orbitcal.diagnose.report import build_report
 from orbitcal.diagnose.where import where_analysis
+from orbitcal.errors import BadInputError
 
 if TYPE_CHECKING:  # pragma: no cover
     from orbitcal.orbit import Propagator
@@ -119,8 +120,9 @@ def diagnosis_data(
     from orbitcal.truth import truth_for_telemetry
 
     if telemetry.q_wxyz is None:
-        raise ValueError(
-            "the diagnosis needs attitude quaternions (q_w, q_x, q_y, q_z) to compare vectors"
+        raise BadInputError(
+            "the diagnosis needs attitude quaternions (q_w, q_x, q_y, q_z) to compare vectors",
+            field="q_w",
         )
     truth = truth_for_telemetry(telemetry, orbit=orbit, attitude_frame=attitude_frame, field=field)
     t = np.asarray(telemetry.t_utc_s, dtype=float)

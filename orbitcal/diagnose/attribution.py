@@ -32,6 +32,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy import stats
 
+from orbitcal.diagnose.bounds import consistency_reasons, param_range
 from orbitcal.diagnose.effects import (
     CATALOGUE,
     FIELD_SCALE_NT,
@@ -105,6 +106,10 @@ class JointFit:
         Robust scale of the training residual per component [nT].
     cov_cal : ndarray, shape (12, 12)
         Covariance of ``(a.ravel(), o)`` from the fit, assuming white residuals.
+    coef_cov : list of ndarray
+        Covariance of each block's parameters (white residuals, as ``cov_cal``).
+    bounded : bool
+        Whether the effect parameters were kept inside their physical ranges.
     """
 
     a: FloatArray
@@ -113,6 +118,18 @@ class JointFit:
     coef: list[FloatArray]
     sigma_nt: float
     cov_cal: FloatArray
+    coef_cov: list[FloatArray] = field(default_factory=list)
+    bounded: bool = True
+
+    def at_bounds(self, k: int, *, rel_tol: float = 1e-4) -> list[str]:
+        """Names of block ``k``'s parameters that sit on the edge of their physical range."""
+        out = []
+        for name, v in zip(self.blocks[k].names, self.coef[k], strict=True):
+            rng = param_range(name)
+            for edge in (rng.lower, rng.upper):
+                if np.isfinite(edge) and abs(float(v) - edge) <= rel_tol * max(abs(edge), 1.0):
+                    out.append(name)
+        return out
 
     def effect_nt(self, k: int, g: FloatArray | None = None) -> FloatArray:
         """The field block ``k`` adds at every sample [nT], shape (N, 3)."""
@@ -146,9 +163,13 @@ def _design(data: DiagnosisData, blocks: Sequence[DesignBlock]) -> tuple[FloatAr
     if p > 12:
         # Effect columns are scaled by the part the calibration cannot absorb, so the ridge acts
         # on what the data can tell apart (a time offset under a steady spin is mostly absorbed).
-        q_cal, _ = np.linalg.qr(x2[:, :12])
+        q_cal = data.calibration_q  # the columns x2[:, :12], factorised once per data set
         eff = x2[:, 12:]
+        raw = scale[12:].copy()
         scale[12:] = np.sqrt(np.mean((eff - q_cal @ (q_cal.T @ eff)) ** 2, axis=0))
+        # A column the calibration absorbs whole (the radial gradient of a pure dipole is -3B/r)
+        # keeps a floor, so that the normal equations stay invertible for the covariance.
+        scale[12:] = np.maximum(scale[12:], 1e-6 * raw)
     scale[scale == 0.0] = 1.0
     return x2 / scale, scale
 
@@ -163,6 +184,7 @@ def fit_joint(
     ridge_effects: float = 1e-5,
     huber_steps: int = 6,
     use_prior: bool = True,
+    bounded: bool = True,
 ) -> JointFit:
     """Fit the 12 calibration parameters and the effect parameters on the samples ``fit_mask``.
 
@@ -188,6 +210,11 @@ def fit_joint(
     use_prior : bool
         Apply ``data.calibration_prior`` (if any) to the 12 calibration parameters; split fits,
         which ask what the free parameters absorb, turn it off.
+    bounded : bool
+        Keep every effect parameter inside its physical range
+        (:func:`orbitcal.diagnose.bounds.param_range`): box-constrained least squares on the
+        normal equations of each reweighting step. False fits them freely (to tell whether a
+        candidate only wins by leaving its range).
     """
     x_all, scale = _design(data, blocks)
     rows = np.repeat(fit_mask, 3)
@@ -220,14 +247,28 @@ def fit_joint(
             r0 = y - x[:, :12] @ prior_mean[:12]
         noise = max(float(1.4826 * np.median(np.abs(r0 - np.median(r0)))), 1e-6)
         prior_precision *= noise**2
+    lo_s, hi_s = _scaled_bounds(blocks, scale) if bounded else (None, None)
+    if bounded:
+        # Gaussian priors of parameters with a published value (bounds.ParamRange.prior_*),
+        # weighted by the noise of a fit without them (fixed, as for the calibration prior).
+        pm, pp = _effect_priors(blocks, scale)
+        if np.any(pp > 0.0):
+            coef0 = np.linalg.lstsq(x, y, rcond=None)[0]
+            r0 = y - x @ coef0
+            noise = max(float(1.4826 * np.median(np.abs(r0 - np.median(r0)))), 1e-6)
+            prior_mean = np.where(pp > 0.0, pm, prior_mean)
+            prior_precision = prior_precision + pp * noise**2
     for it in range(iterations if robust else 1):
         xw = x * w[:, None]
         normal = x.T @ xw + ridge * x.shape[0] + np.diag(prior_precision)
+        rhs = xw.T @ y + prior_precision * prior_mean
         try:
-            theta = np.linalg.solve(normal, xw.T @ y + prior_precision * prior_mean)
+            theta = np.linalg.solve(normal, rhs)
         except np.linalg.LinAlgError:  # pragma: no cover - singular design
             sw = np.sqrt(w)
             theta = np.asarray(np.linalg.lstsq(x * sw[:, None], y * sw, rcond=None)[0], float)
+        if lo_s is not None and hi_s is not None and (np.any(theta < lo_s) or np.any(theta > hi_s)):
+            theta = _box_solve(normal, rhs, lo_s, hi_s, theta)
         r = y - x @ theta
         sigma = max(float(1.4826 * np.median(np.abs(r - np.median(r)))), 1e-6)
         if not robust or it == iterations - 1:
@@ -239,7 +280,10 @@ def fit_joint(
             u = np.abs(r) / (4.685 * sigma)  # Tukey bisquare, c = 4.685 sigma
             w = np.where(u < 1.0, (1.0 - u**2) ** 2, 0.0)
     # Covariance of the calibration parameters (white-noise assumption; the split tests inflate it).
-    cov_scaled = np.linalg.pinv(normal) * sigma**2
+    try:
+        cov_scaled = np.linalg.inv(normal) * sigma**2
+    except np.linalg.LinAlgError:  # pragma: no cover - singular design
+        cov_scaled = np.linalg.pinv(normal) * sigma**2
     cov = cov_scaled / np.outer(scale, scale)
     theta = theta / scale
     a = theta[:9].reshape(3, 3) / FIELD_SCALE_NT
@@ -247,19 +291,89 @@ def fit_joint(
     cov_cal[:9, :] /= FIELD_SCALE_NT
     cov_cal[:, :9] /= FIELD_SCALE_NT
     coef = []
+    coef_cov = []
     col = 12
     for bl in blocks:
         q = len(bl.names)
         coef.append(theta[col : col + q])
+        coef_cov.append(cov[col : col + q, col : col + q].copy())
         col += q
     return JointFit(
-        a=a, o_nt=theta[9:12], blocks=list(blocks), coef=coef, sigma_nt=sigma, cov_cal=cov_cal
+        a=a,
+        o_nt=theta[9:12],
+        blocks=list(blocks),
+        coef=coef,
+        sigma_nt=sigma,
+        cov_cal=cov_cal,
+        coef_cov=coef_cov,
+        bounded=bounded,
     )
 
 
-def _train_bic(data: DiagnosisData, train: BoolArray, blocks: Sequence[DesignBlock]) -> float:
-    """Bayesian information criterion of a plain least-squares fit on the training samples."""
-    fit = fit_joint(data, train, blocks, robust=False)
+def _scaled_bounds(
+    blocks: Sequence[DesignBlock], scale: FloatArray
+) -> tuple[FloatArray | None, FloatArray | None]:
+    """Lower and upper bounds of the unit-scaled parameters (None when nothing is bounded)."""
+    lo = [np.full(12, -np.inf)]
+    hi = [np.full(12, np.inf)]
+    for bl in blocks:
+        ranges = [param_range(n) for n in bl.names]
+        lo.append(np.array([r.lower for r in ranges]))
+        hi.append(np.array([r.upper for r in ranges]))
+    lo_all, hi_all = np.concatenate(lo), np.concatenate(hi)
+    if not (np.any(np.isfinite(lo_all)) or np.any(np.isfinite(hi_all))):
+        return None, None
+    return lo_all * scale, hi_all * scale
+
+
+def _effect_priors(
+    blocks: Sequence[DesignBlock], scale: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Prior means and precisions of the unit-scaled parameters (precision 0: no prior)."""
+    mean = np.zeros(scale.size)
+    prec = np.zeros(scale.size)
+    col = 12
+    for bl in blocks:
+        for n in bl.names:
+            rng = param_range(n)
+            if rng.prior_mean is not None and rng.prior_sd:
+                mean[col] = rng.prior_mean * scale[col]
+                prec[col] = 1.0 / (rng.prior_sd * scale[col]) ** 2
+            col += 1
+    return mean, prec
+
+
+def _box_solve(
+    normal: FloatArray, rhs: FloatArray, lo: FloatArray, hi: FloatArray, start: FloatArray
+) -> FloatArray:
+    """``argmin 1/2 t' N t - rhs' t`` subject to ``lo <= t <= hi`` (bounded-variable LS).
+
+    With ``N = L L'`` the objective is ``1/2 |L' t - L^-1 rhs|^2`` up to a constant, a small
+    (p x p) problem for :func:`scipy.optimize.lsq_linear`.
+    """
+    from scipy.linalg import cho_factor, solve_triangular
+    from scipy.optimize import lsq_linear
+
+    try:
+        c, lower = cho_factor(normal, lower=True)
+    except np.linalg.LinAlgError:  # pragma: no cover - not positive definite
+        return np.clip(start, lo, hi)
+    l_mat = np.tril(c) if lower else np.triu(c).T
+    b = solve_triangular(l_mat, rhs, lower=True)
+    res = lsq_linear(l_mat.T, b, bounds=(lo, hi), method="bvls", tol=1e-12)
+    return np.asarray(res.x, dtype=float)
+
+
+def _train_bic(
+    data: DiagnosisData, train: BoolArray, blocks: Sequence[DesignBlock], *, bounded: bool = True
+) -> float:
+    """Bayesian information criterion of a plain least-squares fit on the training samples.
+
+    Infinite when the last block's parameters contradict each other (``consistency_reasons``).
+    """
+    fit = fit_joint(data, train, blocks, robust=False, bounded=bounded)
+    if blocks and _inconsistent(fit, len(blocks) - 1):
+        return float("inf")
     r = data.b_raw_nt[train] - fit.predict_nt(data)[train]
     n = r.size
     k = 12 + sum(len(b.names) for b in blocks)
@@ -275,14 +389,150 @@ def _bic(fit: JointFit, residual_nt: FloatArray, train: BoolArray) -> float:
 
 
 def _resolve(
-    data: DiagnosisData, train: BoolArray, fixed: Sequence[DesignBlock], block: DesignBlock
+    data: DiagnosisData,
+    train: BoolArray,
+    fixed: Sequence[DesignBlock],
+    block: DesignBlock,
+    *,
+    bounded: bool = True,
 ) -> DesignBlock:
-    """Pick among a block's alternatives by the training BIC (never the held-out data)."""
+    """Pick among a block's alternatives by the training BIC (never the held-out data).
+
+    A variant whose parameters contradict each other (e.g. a second-order time-shift term that
+    is not the square of the shift) is not chosen.
+    """
     if not block.alternatives:
         return block
     options = [block, *block.alternatives]
-    bic = [_train_bic(data, train, [*fixed, opt]) for opt in options]
+    bic = [_train_bic(data, train, [*fixed, opt], bounded=bounded) for opt in options]
+    if not np.any(np.isfinite(bic)):
+        return block
     return options[int(np.argmin(bic))]
+
+
+def _sd(fit: JointFit, k: int) -> FloatArray:
+    """Standard deviations of block ``k``'s parameters (white residuals)."""
+    return np.sqrt(np.clip(np.diag(fit.coef_cov[k]), 0.0, None))
+
+
+def _inconsistent(fit: JointFit, k: int) -> bool:
+    return bool(
+        consistency_reasons(
+            fit.blocks[k].names, [float(v) for v in fit.coef[k]], [float(v) for v in _sd(fit, k)]
+        )
+    )
+
+
+#: Two-sided 90 % quantile of the standard normal distribution.
+Z90 = 1.6448536269514722
+
+
+def _intervals(
+    fit: JointFit, k: int, residual_nt: FloatArray, train: BoolArray
+) -> dict[str, list[float]]:
+    """90 % intervals of block ``k``'s parameters, clipped to their physical ranges.
+
+    Fit covariance (robust weights, sigma from the MAD), its variance inflated by the
+    autocorrelation of the training residual (``1 + 2 sum rho_k``, the largest of the three
+    axes), so that a residual correlated over many samples does not pass for many independent
+    ones.
+    """
+    if k >= len(fit.coef_cov):
+        return {}
+    r = residual_nt[train]
+    infl = max(_autocorr_inflation(r[:, i]) for i in range(3))
+    sd = _sd(fit, k) * np.sqrt(infl)
+    out: dict[str, list[float]] = {}
+    for n, v, e in zip(fit.blocks[k].names, fit.coef[k], sd, strict=True):
+        rng = param_range(n)
+        out[n] = [max(float(v - Z90 * e), rng.lower), min(float(v + Z90 * e), rng.upper)]
+    return out
+
+
+def _chunk_sums(
+    r_nt: FloatArray, holdout: BoolArray, n_chunks: int
+) -> tuple[FloatArray, FloatArray]:
+    """Sum of |r|^2 and sample count per consecutive chunk of the held-out samples."""
+    e = np.sum(r_nt[holdout] ** 2, axis=1)
+    parts = [c for c in np.array_split(np.arange(e.size), n_chunks) if c.size]
+    return np.array([e[c].sum() for c in parts]), np.array([c.size for c in parts], dtype=float)
+
+
+#: Block-bootstrap resamples for the shrink intervals and the verdict confidence.
+N_BOOTSTRAP = 400
+
+
+def _shrink_interval(
+    r_before: FloatArray, r_after: FloatArray, holdout: BoolArray, n_chunks: int
+) -> tuple[float, float] | None:
+    """90 % interval of the held-out shrink: block bootstrap over the held-out chunks."""
+    eb, _ = _chunk_sums(r_before, holdout, n_chunks)
+    ea, _ = _chunk_sums(r_after, holdout, n_chunks)
+    if eb.size < 5:
+        return None
+    rng = np.random.default_rng(0)
+    idx = rng.integers(0, eb.size, size=(N_BOOTSTRAP, eb.size))
+    ratio = np.sqrt(eb[idx].sum(axis=1) / np.maximum(ea[idx].sum(axis=1), 1e-300))
+    lo, hi = np.percentile(ratio, [5.0, 95.0])
+    return float(lo), float(hi)
+
+
+def _verdict_confidence(
+    verdict: str,
+    twins: Sequence[str],
+    r_base: FloatArray,
+    residuals: dict[str, FloatArray],
+    holdout: BoolArray,
+    n_chunks: int,
+    min_gain: float,
+) -> float | None:
+    """Fraction of block-bootstrap resamples in which the first selection step names the verdict.
+
+    The held-out chunks are resampled with replacement; in each resample the candidate with the
+    lowest held-out mean square wins if it beats the calibration alone by ``min_gain`` in RMS,
+    else nothing does (``"none"``). Counted as agreeing: the verdict or a model listed as
+    indistinguishable from it.
+    """
+    eb, _ = _chunk_sums(r_base, holdout, n_chunks)
+    if eb.size < 5:
+        return None
+    names = list(residuals)
+    sums = np.array([_chunk_sums(residuals[n], holdout, n_chunks)[0] for n in names])
+    rng = np.random.default_rng(1)
+    idx = rng.integers(0, eb.size, size=(N_BOOTSTRAP, eb.size))
+    base_tot = eb[idx].sum(axis=1)
+    agree = 0
+    ok = {verdict, *twins}
+    if names:
+        tot = sums[:, idx].sum(axis=2)  # (candidates, resamples)
+        best = np.argmin(tot, axis=0)
+        wins = tot[best, np.arange(idx.shape[0])] < base_tot * (1.0 - min_gain) ** 2
+        for b, w in zip(best, wins, strict=True):
+            agree += int((names[int(b)] if w else "none") in ok)
+    else:
+        agree = N_BOOTSTRAP if verdict == "none" else 0
+    return agree / N_BOOTSTRAP
+
+
+def _calibration_basis(data: DiagnosisData, train: BoolArray) -> FloatArray:
+    """Orthonormal basis of the 12 calibration columns on the training rows, (3 n_train, 12)."""
+    b = data.b_ref_body_nt[train] / FIELD_SCALE_NT
+    x = np.zeros((b.shape[0], 3, 12))
+    for i in range(3):
+        x[:, i, 3 * i : 3 * i + 3] = b
+        x[:, i, 9 + i] = 1.0
+    q, _ = np.linalg.qr(x.reshape(-1, 12))
+    return np.asarray(q)
+
+
+def _absorbed_fraction(fit: JointFit, k: int, train: BoolArray, basis: FloatArray) -> float | None:
+    """Share of block ``k``'s fitted field (training energy) inside the calibration's span."""
+    f = fit.effect_nt(k)[train].reshape(-1)
+    total = float(f @ f)
+    if total <= 0.0:
+        return None
+    proj = basis.T @ f
+    return float(proj @ proj) / total
 
 
 @dataclass(frozen=True)
@@ -307,6 +557,18 @@ class EffectScore:
         selected set [nT] (0 for effects not selected).
     step : int
         1-based selection step, 0 when not selected.
+    implausible : str or None
+        Why the candidate is ``implausible`` (it would only win with a parameter outside its
+        physical range, or with parameters that contradict each other); None otherwise.
+    intervals : dict
+        90 % confidence interval ``[low, high]`` of every parameter (fit covariance, inflated for
+        the autocorrelation of the training residual, clipped to the physical range).
+    shrink_interval : (float, float) or None
+        90 % interval of the held-out shrink (block bootstrap over the held-out chunks).
+    absorbed_fraction : float or None
+        Fraction of the fitted effect's field (training blocks, energy) that a change of the 12
+        calibration parameters reproduces: near 1, the span cannot separate the effect from the
+        calibration.
     """
 
     name: str
@@ -317,6 +579,10 @@ class EffectScore:
     params: dict[str, Any]
     unique_rms_increase_nt: float = 0.0
     step: int = 0
+    implausible: str | None = None
+    intervals: dict[str, list[float]] = field(default_factory=dict)
+    shrink_interval: tuple[float, float] | None = None
+    absorbed_fraction: float | None = None
 
     @property
     def shrink(self) -> float:
@@ -378,6 +644,16 @@ class Attribution:
     split_fits : list of SplitFit
     fits : dict
         ``"baseline"`` and ``"final"`` JointFit objects.
+    verdict_confidence : float or None
+        Fraction of block-bootstrap resamples of the held-out chunks in which the verdict (or a
+        model listed as indistinguishable from it) still wins the first selection step; None
+        when the verdict came from a split fit or the regional test.
+    implausible : dict
+        Candidates reported ``implausible``, with the reason.
+    has_prior : bool
+        Whether a calibration prior held the 12 parameters.
+    span_s : float
+        Time span of the data [s].
     """
 
     baseline_rms_nt: float
@@ -392,6 +668,10 @@ class Attribution:
     final_residual_nt: FloatArray
     split_fits: list[SplitFit] = field(default_factory=list)
     fits: dict[str, JointFit] = field(default_factory=dict)
+    verdict_confidence: float | None = None
+    implausible: dict[str, str] = field(default_factory=dict)
+    has_prior: bool = False
+    span_s: float = 0.0
 
 
 def _chunk_test(r_before: FloatArray, r_after: FloatArray, n_chunks: int) -> tuple[float, float]:
@@ -515,32 +795,82 @@ def attribute(
             designs[eff.name] = block
 
     def evaluate(
-        fixed: list[DesignBlock], block: DesignBlock
+        fixed: list[DesignBlock], block: DesignBlock, *, bounded: bool = True
     ) -> tuple[JointFit, FloatArray, float]:
-        chosen = _resolve(data, train, fixed, block)
-        fit = fit_joint(data, train, [*fixed, chosen], robust=robust)
+        chosen = _resolve(data, train, fixed, block, bounded=bounded)
+        fit = fit_joint(data, train, [*fixed, chosen], robust=robust, bounded=bounded)
         r = data.b_raw_nt - fit.predict_nt(data)
         return fit, r, vector_rms_nt(r[holdout])
+
+    def test(fit: JointFit, r: FloatArray, r_before: FloatArray) -> float:
+        sup, chunks = _support(fit, train, holdout, n_chunks, n_chunks_local)
+        return _chunk_test(r_before[sup], r[sup], chunks)[0]
+
+    implausible: dict[str, str] = {}
+
+    def leaves_range(
+        fixed: list[DesignBlock],
+        block: DesignBlock,
+        fit: JointFit,
+        level: float,
+        rms_before: float,
+        r_before: FloatArray,
+    ) -> str | None:
+        """Why a candidate is implausible: its fit runs into the edge of a physical range.
+
+        The free (unbounded) fit then puts a parameter outside its range: the model explains
+        the data only with unphysical values, whether or not its edge-of-range fit passes the
+        held-out test.
+        """
+        if not fit.at_bounds(len(fit.blocks) - 1):
+            return None
+        # The variant the bounded fit chose, refitted freely (no new choice among variants).
+        free, r_free, rms_free = evaluate(fixed, fit.blocks[-1], bounded=False)
+        r_bounded = data.b_raw_nt - fit.predict_nt(data)
+        if _twins(("", free, r_free), ("", fit, r_bounded), train):
+            return None  # the range costs nothing: the data leave that direction open
+        wins = test(free, r_free, r_before) < level and rms_free < rms_before * (1.0 - min_gain)
+        bl = free.blocks[-1]
+        # Outside by more than 3 standard deviations: a direction the data leave open (a column
+        # the calibration absorbs whole) may take any value and proves nothing; a value
+        # compatible with zero (a crust amplitude of 0 +- 0.1) means the effect is absent.
+        outside = [
+            f"{n} = {float(v):.4g} +- {float(e):.2g} outside {param_range(n).describe()}"
+            for n, v, e in zip(
+                bl.names, free.coef[-1], _sd(free, len(free.blocks) - 1), strict=True
+            )
+            if not (param_range(n).lower - 3.0 * e <= float(v) <= param_range(n).upper + 3.0 * e)
+            and abs(float(v)) > 3.0 * e  # compatible with zero: absent, not implausible
+        ]
+        if not outside:
+            return None
+        how = "wins only by leaving" if wins else "its fit runs out of"
+        return (
+            f"{how} its physical range: "
+            + "; ".join(outside)
+            + f" (held-out vector RMS {rms_free:.3g} nT so, {rms_before:.3g} nT before)"
+        )
 
     # Single-effect scores against the baseline (also the first greedy step).
     single: dict[str, tuple[JointFit, FloatArray, float, float]] = {}
     for name, block in designs.items():
         fit, r, rms = evaluate([], block)
-        sup, chunks = _support(fit, train, holdout, n_chunks, n_chunks_local)
-        p, _ = _chunk_test(r_base[sup], r[sup], chunks)
-        single[name] = (fit, r, rms, p)
+        single[name] = (fit, r, rms, test(fit, r, r_base))
 
     selected: list[str] = []
     indistinguishable: dict[str, list[str]] = {}
     chosen_blocks: list[DesignBlock] = []
     step_scores: list[EffectScore] = []
+    step_residuals: list[tuple[FloatArray, FloatArray]] = []
     current_r = r_base
     current_rms = base_rms
     current_fit = base
     for step in range(1, max_steps + 1):
-        remaining = [n for n in designs if n not in selected]
+        remaining = [n for n in designs if n not in selected and n not in implausible]
         if not remaining:
             break
+        # Bonferroni over the candidates still in play: with the effects already selected in
+        # the model, each step is a new family of tests of what is left (Holm's step-down).
         level = alpha / len(remaining)
         passing: list[tuple[str, JointFit, FloatArray, float, float]] = []
         for name in remaining:
@@ -548,9 +878,11 @@ def attribute(
                 fit, r, rms, p = single[name]
             else:
                 fit, r, rms = evaluate(chosen_blocks, designs[name])
-                sup, chunks = _support(fit, train, holdout, n_chunks, n_chunks_local)
-                p, _ = _chunk_test(current_r[sup], r[sup], chunks)
-            if p < level and rms < current_rms * (1.0 - min_gain):
+                p = test(fit, r, current_r)
+            reason = leaves_range(chosen_blocks, designs[name], fit, level, current_rms, current_r)
+            if reason is not None:
+                implausible[name] = reason
+            elif p < level and rms < current_rms * (1.0 - min_gain):
                 passing.append((name, fit, r, rms, p))
         if not passing:
             break
@@ -574,6 +906,7 @@ def attribute(
                 name, True, current_rms, rms, p, _params(fit, len(fit.blocks) - 1), step=step
             )
         )
+        step_residuals.append((current_r, r))
         current_r, current_rms, current_fit = r, rms, fit
 
     # Drop-one unique contributions of the selected set.
@@ -587,11 +920,13 @@ def attribute(
             r = data.b_raw_nt - fit.predict_nt(data)
             unique[name] = vector_rms_nt(r[holdout]) - current_rms
 
+    cal_basis = _calibration_basis(data, train)
     effects: list[EffectScore] = []
     for k, sc in enumerate(step_scores):
         params = _params(current_fit, k)  # final joint values
         if sc.name in indistinguishable:
             params["indistinguishable_from"] = indistinguishable[sc.name]
+        before_r, after_r = step_residuals[k]
         effects.append(
             EffectScore(
                 sc.name,
@@ -602,13 +937,40 @@ def attribute(
                 params,
                 unique_rms_increase_nt=unique.get(sc.name, 0.0),
                 step=sc.step,
+                intervals=_intervals(current_fit, k, current_r, train),
+                shrink_interval=_shrink_interval(before_r, after_r, holdout, n_chunks),
+                absorbed_fraction=_absorbed_fraction(current_fit, k, train, cal_basis),
             )
         )
-    rest = sorted((n for n in single if n not in selected), key=lambda n: single[n][2])
+    rest = sorted(
+        (n for n in single if n not in selected), key=lambda n: (n in implausible, single[n][2])
+    )
     for name in rest:
-        fit, _, rms, p = single[name]
-        effects.append(EffectScore(name, False, base_rms, rms, p, _params(fit, 0)))
+        fit, r, rms, p = single[name]
+        effects.append(
+            EffectScore(
+                name,
+                False,
+                base_rms,
+                rms,
+                p,
+                _params(fit, 0),
+                implausible=implausible.get(name),
+                intervals=_intervals(fit, 0, r, train),
+                shrink_interval=_shrink_interval(r_base, r, holdout, n_chunks),
+                absorbed_fraction=_absorbed_fraction(fit, 0, train, cal_basis),
+            )
+        )
 
+    confidence: float | None = _verdict_confidence(
+        selected[0] if selected else "none",
+        indistinguishable.get(selected[0], []) if selected else [],
+        r_base,
+        {n: v[1] for n, v in single.items() if n not in implausible},
+        holdout,
+        n_chunks,
+        min_gain,
+    )
     flat = all(v[2] >= base_rms * (1.0 - min_gain) for v in single.values())
     if not selected and flat:
         # Nothing moves the held-out residual: look for an effect the calibration absorbed whole.
@@ -617,6 +979,7 @@ def attribute(
             selected.append(absorbed.name)
             step_scores.append(absorbed)
             effects = [absorbed] + [e for e in effects if e.name != absorbed.name]
+            confidence = None  # judged by a split fit, not by the held-out chunks
     # What the selected effects leave (e.g. a storm's auroral part once the ring current is in).
     regional = _regional_fac(data, current_r, train, holdout, selected)
     if regional is not None and regional.significant:
@@ -624,6 +987,7 @@ def attribute(
         effects.insert(len(step_scores), regional)
         if not selected:
             selected.append(regional.name)
+            confidence = None
     splits = split_fit_tests(data, robust=robust) if split_tests else []
     return Attribution(
         baseline_rms_nt=base_rms,
@@ -638,6 +1002,10 @@ def attribute(
         final_residual_nt=current_r,
         split_fits=splits,
         fits={"baseline": base, "final": current_fit},
+        verdict_confidence=confidence,
+        implausible=implausible,
+        has_prior=data.calibration_prior is not None,
+        span_s=float(data.t_utc_s[-1] - data.t_utc_s[0]),
     )
 
 

@@ -394,3 +394,234 @@ def run_benchmark(
             "norad_ids": list(NORAD_IDS),
         },
     }
+
+
+# ---- compound worlds ---------------------------------------------------------------------------
+
+#: Magnitudes of the compound worlds (relative to each effect's default; per-effect sets as above).
+COMPOUND_MAGNITUDE_INDEX: tuple[int, ...] = (1, 2)
+
+
+@dataclass(frozen=True)
+class CompoundCase:
+    """One world with several effects injected at once."""
+
+    index: int
+    effects: tuple[str, ...]
+    magnitudes: tuple[float, ...]
+    attitude: str
+    norad_id: int
+    seed: int
+
+
+def plan_compound_cases(n_cases: int, *, seed: int) -> list[CompoundCase]:
+    """Worlds of two and three distinct effects (alternately), drawn at random from the catalogue.
+
+    Magnitudes are the simulator's default or twice it (per-effect sets of
+    ``MAGNITUDES_BY_EFFECT``); a world with field-aligned currents flies a polar Swarm orbit.
+    """
+    rng = np.random.default_rng(seed)
+    cases = []
+    for i in range(n_cases):
+        k = 2 + i % 2
+        names = tuple(str(x) for x in rng.choice(EFFECT_NAMES, size=k, replace=False))
+        mags = tuple(
+            float(
+                MAGNITUDES_BY_EFFECT.get(n, MAGNITUDES)[int(rng.choice(COMPOUND_MAGNITUDE_INDEX))]
+            )
+            for n in names
+        )
+        ids = POLAR_NORAD_IDS if "field_aligned_currents" in names else NORAD_IDS
+        cases.append(
+            CompoundCase(
+                index=i,
+                effects=names,
+                magnitudes=mags,
+                attitude=ATTITUDES[int(rng.integers(len(ATTITUDES)))],
+                norad_id=int(rng.choice(ids)),
+                seed=int(rng.integers(0, 2**31 - 1)),
+            )
+        )
+    return cases
+
+
+def run_compound_case(
+    case: CompoundCase,
+    *,
+    tle_text: str,
+    n_orbits: float = 4.0,
+    cadence_s: float = 10.0,
+    crust_model: str | None = "LCS-1",
+) -> dict[str, Any]:
+    """Simulate a world with several effects, diagnose it blind, score found / spurious effects.
+
+    An injected effect is *observable* when removing every injected field but its own leaves a
+    held-out gap of at least ``OBSERVABLE_GAIN`` over removing them all (perfect oracle); recall
+    counts the observable ones. A selected effect listed as indistinguishable from an injected one
+    (or the reverse) counts as found, not as spurious.
+    """
+    from orbitcal.diagnose.api import diagnosis_data
+    from orbitcal.diagnose.effects import DiagnosisData
+    from orbitcal.orbit import Orbit
+    from orbitcal.simulate import NadirLVLH, Tumbling, select_tle, simulate_world
+
+    rng = np.random.default_rng(case.seed)
+    tles = [s for s in _tle_sets(tle_text) if s.norad_id == case.norad_id]
+    tle = tles[int(rng.integers(len(tles)))]
+    start = tle.epoch_utc_s + float(rng.uniform(0.0, 86400.0))
+    tle = select_tle(tle_text, norad_id=case.norad_id, at_utc_s=start)
+    if case.attitude == "nadir":
+        attitude: Any = NadirLVLH()
+    else:
+        rate = rng.normal(size=3)
+        rate *= float(rng.uniform(0.5, 3.0)) / np.linalg.norm(rate)
+        q0 = rng.normal(size=4)
+        attitude = Tumbling(
+            rate_body_deg_s=tuple(float(x) for x in rate),  # type: ignore[arg-type]
+            q0_wxyz=tuple(float(x) for x in q0 / np.linalg.norm(q0)),  # type: ignore[arg-type]
+        )
+    effects = [
+        _scaled_effect(n, m, rng) for n, m in zip(case.effects, case.magnitudes, strict=True)
+    ]
+    period_s = 86400.0 / float(tle.line2[52:63])
+    t0 = time.perf_counter()
+    world = simulate_world(
+        tle,
+        start_utc_s=start,
+        duration_s=n_orbits * period_s,
+        cadence_s=cadence_s,
+        rng=rng,
+        attitude=attitude,
+        effects=effects,
+    )
+    data = diagnosis_data(world.telemetry, orbit=Orbit.from_tle(tle.text), crust_model=crust_model)
+    att = attribute(data, split_tests=False)
+    elapsed = time.perf_counter() - t0
+
+    a_sensor = np.asarray(world.sensor.a_matrix)
+    injected = {k: v @ a_sensor.T for k, v in world.injected_body_nt.items()}
+
+    def clean_rms(keep: str | None) -> float:
+        removed = sum((v for k, v in injected.items() if k != keep), np.zeros_like(data.b_raw_nt))
+        clean = DiagnosisData(
+            t_utc_s=data.t_utc_s,
+            b_raw_nt=data.b_raw_nt - removed,
+            b_ref_body_nt=data.b_ref_body_nt,
+            rot_itrs_to_body=data.rot_itrs_to_body,
+            r_itrs_km=data.r_itrs_km,
+        )
+        fit = fit_joint(clean, att.train, [])
+        return vector_rms_nt((clean.b_raw_nt - fit.predict_nt(clean))[att.holdout])
+
+    floor = clean_rms(None)
+    observable = {n: bool(clean_rms(n) >= floor * (1.0 + OBSERVABLE_GAIN)) for n in case.effects}
+    twins: dict[str, set[str]] = {}
+    for e in att.effects:
+        for other in e.params.get("indistinguishable_from", []) if e.significant else []:
+            twins.setdefault(e.name, set()).add(other)
+            twins.setdefault(other, set()).add(e.name)
+    selected = list(att.selected)
+    injected_names = set(case.effects)
+
+    def matches(name: str) -> bool:
+        return name in injected_names or bool(twins.get(name, set()) & injected_names)
+
+    found = {n: (n in selected or bool(twins.get(n, set()) & set(selected))) for n in case.effects}
+    spurious = [s for s in selected if not matches(s)]
+    return {
+        "index": case.index,
+        "effects": list(case.effects),
+        "magnitudes": list(case.magnitudes),
+        "attitude": case.attitude,
+        "norad_id": case.norad_id,
+        "seed": case.seed,
+        "verdict": att.verdict,
+        "verdict_confidence": att.verdict_confidence,
+        "selected": selected,
+        "implausible": sorted(att.implausible),
+        "found": found,
+        "observable": observable,
+        "spurious": spurious,
+        "verdict_hit": matches(att.verdict),
+        "baseline_holdout_rms_nt": att.baseline_rms_nt,
+        "final_holdout_rms_nt": att.final_rms_nt,
+        "perfect_holdout_rms_nt": floor,
+        "seconds": elapsed,
+    }
+
+
+def summarise_compound(results: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """Recall of the observable injected effects, spurious effects per world, verdict hits."""
+    res = list(results)
+    obs = [(r, n) for r in res for n in r["effects"] if r["observable"][n]]
+    per: dict[str, dict[str, Any]] = {}
+    for r, n in obs:
+        entry = per.setdefault(n, {"injected_observable": 0, "found": 0})
+        entry["injected_observable"] += 1
+        entry["found"] += int(r["found"][n])
+    for entry in per.values():
+        entry["recall"] = entry["found"] / entry["injected_observable"]
+    spurious_names: dict[str, int] = {}
+    for r in res:
+        for s in r["spurious"]:
+            spurious_names[s] = spurious_names.get(s, 0) + 1
+    return {
+        "worlds": len(res),
+        "worlds_2": sum(1 for r in res if len(r["effects"]) == 2),
+        "worlds_3": sum(1 for r in res if len(r["effects"]) == 3),
+        "injected": sum(len(r["effects"]) for r in res),
+        "injected_observable": len(obs),
+        "recall": float(np.mean([r["found"][n] for r, n in obs])) if obs else float("nan"),
+        "recall_all_injected": float(np.mean([r["found"][n] for r in res for n in r["effects"]]))
+        if res
+        else float("nan"),
+        "worlds_with_spurious": float(np.mean([bool(r["spurious"]) for r in res]))
+        if res
+        else float("nan"),
+        "spurious_per_world": float(np.mean([len(r["spurious"]) for r in res]))
+        if res
+        else float("nan"),
+        "verdict_among_injected": float(np.mean([r["verdict_hit"] for r in res]))
+        if res
+        else float("nan"),
+        "spurious_by_effect": spurious_names,
+        "per_effect": per,
+        "seconds_total": float(sum(r["seconds"] for r in res)),
+    }
+
+
+def run_compound_benchmark(
+    n_cases: int,
+    *,
+    seed: int,
+    tle_text: str,
+    n_orbits: float = 4.0,
+    cadence_s: float = 10.0,
+    progress: Callable[[int, dict[str, Any]], None] | None = None,
+) -> dict[str, Any]:
+    """Run ``n_cases`` compound worlds; returns ``{"summary", "cases", "settings"}``."""
+    from threadpoolctl import threadpool_limits
+
+    results = []
+    with threadpool_limits(1):
+        for case in plan_compound_cases(n_cases, seed=seed):
+            out = run_compound_case(case, tle_text=tle_text, n_orbits=n_orbits, cadence_s=cadence_s)
+            results.append(out)
+            if progress is not None:
+                progress(case.index, out)
+    return {
+        "summary": summarise_compound(results),
+        "cases": results,
+        "settings": {
+            "n_cases": n_cases,
+            "seed": seed,
+            "n_orbits": n_orbits,
+            "cadence_s": cadence_s,
+            "effects_per_world": [2, 3],
+            "magnitude_index": list(COMPOUND_MAGNITUDE_INDEX),
+            "magnitudes": list(MAGNITUDES),
+            "magnitudes_by_effect": {k: list(v) for k, v in MAGNITUDES_BY_EFFECT.items()},
+            "attitudes": list(ATTITUDES),
+            "norad_ids": list(NORAD_IDS),
+        },
+    }

@@ -37,6 +37,14 @@ def _num(x: float) -> float | None:
     return None if not math.isfinite(x) else round(float(x), 4)
 
 
+def _rms(norm_rms: float) -> float | None:
+    """The attribution's ``sqrt(mean |r|²)`` as the contract's ``*_rms_nt`` (per component,
+    :mod:`orbitcal.metrics`): the same number as ``orbitcal calibrate`` and the service."""
+    from orbitcal.metrics import rms_nt_from_norm
+
+    return _num(rms_nt_from_norm(norm_rms))
+
+
 def _clean(obj: Any) -> Any:
     if isinstance(obj, dict):
         return {str(k): _clean(v) for k, v in obj.items()}
@@ -47,6 +55,64 @@ def _clean(obj: Any) -> Any:
     if isinstance(obj, float):
         return _num(obj)
     return obj
+
+
+#: What data would separate each effect from the calibration when the span cannot.
+SEPARATING_DATA: dict[str, str] = {
+    "temperature": "a sunlit/eclipse cycle (a temperature swing) or a prior calibration",
+    "magnetorquer": "magnetorquer commands switching on and off",
+    "time_offset": "attitude diversity (changing body rates) or a prior calibration",
+    "external_field": "a prior calibration (--calibration), a longer span (several orbits) "
+    "or attitude diversity",
+    "crustal_field": "a longer span with repeated ground tracks",
+    "sun_driven": "a sunlit/eclipse cycle or a prior calibration",
+    "nonlinearity": "attitude diversity (each axis through the whole field range)",
+    "orbit_error": "a longer span or measured (GNSS) positions",
+    "parameter_drift": "a longer span or a prior calibration",
+    "field_aligned_currents": "more auroral crossings",
+    "attitude_error": "attitude diversity or a longer span",
+}
+
+#: Share of an effect's fitted field a change of the 12 parameters reproduces, above which the
+#: span cannot separate the two without a prior calibration.
+ABSORBED_LIMIT = 0.9
+#: Verdict confidence below which the verdict is reported as tentative.
+FIRM_CONFIDENCE = 0.8
+
+
+def _separation(att: Attribution) -> list[dict[str, Any]]:
+    """Selected effects the span cannot separate from the calibration, and what data would."""
+    if att.has_prior:
+        return []
+    out = []
+    for e in att.effects:
+        if not e.significant or e.absorbed_fraction is None:
+            continue
+        if e.absorbed_fraction >= ABSORBED_LIMIT:
+            out.append(
+                {
+                    "effect": e.name,
+                    "absorbed_fraction": e.absorbed_fraction,
+                    "statement": (
+                        f"{e.absorbed_fraction:.0%} of the fitted {e.name} field is what a change "
+                        "of the 12 calibration parameters also produces on this span "
+                        f"({att.span_s / 3600.0:.1f} h): its size is not separable from the "
+                        "calibration, only its presence"
+                    ),
+                    "would_separate": SEPARATING_DATA.get(e.name, "a prior calibration"),
+                }
+            )
+    return out
+
+
+def _verdict_status(att: Attribution, separation: list[dict[str, Any]]) -> str:
+    if att.verdict == "none":
+        return "none"
+    if any(s["effect"] == att.verdict for s in separation):
+        return "tentative: not separable from the calibration on this span"
+    if att.verdict_confidence is not None and att.verdict_confidence < FIRM_CONFIDENCE:
+        return "tentative: another candidate wins in some resamples of the held-out blocks"
+    return "firm"
 
 
 def build_report(
@@ -69,16 +135,30 @@ def build_report(
             {
                 "name": e.name,
                 "significant": bool(e.significant),
-                "holdout_rms_before_nt": _num(e.holdout_rms_before_nt),
-                "holdout_rms_after_nt": _num(e.holdout_rms_after_nt),
+                "holdout_rms_before_nt": _rms(e.holdout_rms_before_nt),
+                "holdout_rms_after_nt": _rms(e.holdout_rms_after_nt),
                 "shrink": _num(e.shrink),
                 "params": _clean(e.params),
                 "p_value": float(f"{e.p_value:.3g}"),
-                "unique_rms_increase_nt": _num(e.unique_rms_increase_nt),
+                "unique_rms_increase_nt": _rms(e.unique_rms_increase_nt),
                 "selection_step": e.step,
                 "witness": eff.witness,
+                "status": (
+                    "implausible"
+                    if e.implausible
+                    else ("selected" if e.significant else "not significant")
+                ),
+                "implausible_reason": e.implausible,
+                "param_intervals_90": _clean(e.intervals),
+                "shrink_interval_90": _clean(list(e.shrink_interval))
+                if e.shrink_interval is not None
+                else None,
+                "absorbed_by_calibration_fraction": _num(e.absorbed_fraction)
+                if e.absorbed_fraction is not None
+                else None,
             }
         )
+    separation = _separation(att)
     t = data.t_utc_s
     from orbitcal.timescales import utc_s_to_iso
 
@@ -87,19 +167,27 @@ def build_report(
     report: dict[str, Any] = {
         "baseline": {
             "method": BASELINE_METHOD,
-            "holdout_rms_nt": _num(att.baseline_rms_nt),
-            "train_rms_nt": _num(att.baseline_train_rms_nt),
+            "holdout_rms_nt": _rms(att.baseline_rms_nt),
+            "norm_holdout_rms_nt": _num(att.baseline_rms_nt),
+            "train_rms_nt": _rms(att.baseline_train_rms_nt),
+            "n_holdout": int(np.count_nonzero(att.holdout)),
             "reference_field": data.reference_field,
             "calibration_prior": (
                 data.calibration_prior.summary() if data.calibration_prior is not None else None
             ),
         },
         "verdict": att.verdict,
+        "verdict_confidence": _num(att.verdict_confidence)
+        if att.verdict_confidence is not None
+        else None,
+        "verdict_status": _verdict_status(att, separation),
+        "separation": _clean(separation),
         "effects": effects,
         "where": _clean(where),
         "final": {
             "effects": list(att.selected),
-            "holdout_rms_nt": _num(att.final_rms_nt),
+            "holdout_rms_nt": _rms(att.final_rms_nt),
+            "norm_holdout_rms_nt": _num(att.final_rms_nt),
             "shrink": _num(att.baseline_rms_nt / max(att.final_rms_nt, 1e-12)),
             "where": _clean(where_final) if where_final is not None else None,
         },
@@ -130,7 +218,25 @@ def build_report(
     }
     if learned is not None:
         report["learned"] = _clean(learned)
+    report["provenance"] = _provenance(data, att)
     return report
+
+
+def _provenance(data: DiagnosisData, att: Attribution) -> dict[str, Any]:
+    """The tables behind the report (orbitcal.auxdata) and which external-field variant ran."""
+    from orbitcal.auxdata import tables_provenance
+
+    variant = next(
+        (str(e.params.get("variant")) for e in att.effects if e.name == "external_field"), None
+    )
+    if variant is not None and data.b_ext_body_nt is None and data.rc_index_nt is None:
+        variant += " (estimated from the data; no RC index for these dates)"
+    return tables_provenance(
+        data.t_utc_s,
+        reference_field=data.reference_field,
+        rc_index_used=data.rc_index_nt is not None,
+        external_field_variant=variant,
+    )
 
 
 # ---- HTML --------------------------------------------------------------------------------------
@@ -225,29 +331,64 @@ def report_html(
     title: str = "orbitcal diagnosis",
 ) -> str:
     """A self-contained HTML page of a report (plots embedded as base64 PNG)."""
+
+    def interval(x: Any) -> str:
+        return "-" if not x else f"[{x[0]}, {x[1]}]"
+
+    def param_rows(e: dict[str, Any]) -> str:
+        iv = e.get("param_intervals_90") or {}
+        cells = "; ".join(
+            f"{html.escape(k)} = {v} {interval(iv.get(k))}"
+            for k, v in e["params"].items()
+            if isinstance(v, float | int) and not isinstance(v, bool)
+        )
+        return html.escape(cells[:600]) if cells else "-"
+
     rows = "".join(
-        f"<tr><td>{html.escape(e['name'])}</td><td>{'yes' if e['significant'] else 'no'}</td>"
+        f"<tr><td>{html.escape(e['name'])}</td><td>{html.escape(e.get('status', ''))}</td>"
         f"<td>{e['holdout_rms_before_nt']}</td><td>{e['holdout_rms_after_nt']}</td>"
-        f"<td>{e['shrink']}</td><td>{e['p_value']}</td></tr>"
+        f"<td>{e['shrink']} {interval(e.get('shrink_interval_90'))}</td><td>{e['p_value']}</td>"
+        f"<td style='font-size:80%'>{param_rows(e)}"
+        + (
+            f"<br><i>implausible: {html.escape(e['implausible_reason'])}</i>"
+            if e.get("implausible_reason")
+            else ""
+        )
+        + "</td></tr>"
         for e in report["effects"]
     )
+    sep = "".join(
+        f"<li>{html.escape(s['statement'])}; would separate it: "
+        f"{html.escape(s['would_separate'])}</li>"
+        for s in report.get("separation", [])
+    )
+    conf = report.get("verdict_confidence")
     figs = "".join(
         f"<h2>{html.escape(name)}</h2>"
         f"<img alt='{html.escape(name)}' src='data:image/png;base64,{png}'/>"
         for name, png in _figures(report, data, attribution)
     )
     where = html.escape(json.dumps(report["where"], indent=1)[:20000])
+    prov = report.get("provenance") or {}
+    prov_html = "".join(
+        f"<p><b>Warning:</b> {html.escape(w)}</p>" for w in prov.get("warnings", [])
+    )
+    prov_html += f"<h2>Tables used</h2><pre>{html.escape(json.dumps(prov, indent=1))}</pre>"
     return (
         "<!doctype html><html><head><meta charset='utf-8'>"
         f"<title>{html.escape(title)}</title>"
         "<style>body{font-family:sans-serif;max-width:960px;margin:auto}"
         "td,th{padding:2px 8px;border-bottom:1px solid #ddd}</style></head><body>"
         f"<h1>{html.escape(title)}</h1>"
-        f"<p>Verdict: <b>{html.escape(str(report['verdict']))}</b>. Baseline "
+        f"<p>Verdict: <b>{html.escape(str(report['verdict']))}</b> "
+        f"({html.escape(str(report.get('verdict_status', '')))}; confidence "
+        f"{'-' if conf is None else f'{conf:.0%}'}). Baseline "
         f"{html.escape(report['baseline']['method'])} held-out RMS "
         f"{report['baseline']['holdout_rms_nt']} nT; with the selected effects "
         f"{report['final']['holdout_rms_nt']} nT (shrink {report['final']['shrink']}).</p>"
-        "<table><tr><th>effect</th><th>significant</th><th>before [nT]</th><th>after [nT]</th>"
-        f"<th>shrink</th><th>p</th></tr>{rows}</table>{figs}"
-        f"<h2>Where (JSON)</h2><pre>{where}</pre></body></html>"
+        + (f"<p>Not separable on this span:</p><ul>{sep}</ul>" if sep else "")
+        + "<table><tr><th>effect</th><th>status</th><th>before [nT]</th><th>after [nT]</th>"
+        "<th>shrink [90 % interval]</th><th>p</th><th>parameters [90 % intervals]</th></tr>"
+        f"{rows}</table>{figs}"
+        f"<h2>Where (JSON)</h2><pre>{where}</pre>{prov_html}</body></html>"
     )

@@ -120,7 +120,7 @@ def where_analysis(
     Returns
     -------
     dict
-        ``axis_rms_nt`` [x, y, z], ``vector_rms_nt``, ``scalar_rms_nt``,
+        ``axis_rms_nt`` [x, y, z], ``rms_nt`` (per component), ``norm_rms_nt``, ``scalar_rms_nt``,
         ``perpendicular_rms_nt``, ``scalar_to_vector``, ``magnetic_latitude``, ``sunlit_eclipse``,
         ``local_time``, ``orbit_phase``, ``time``, ``frequency``, ``concentration`` (the band and
         condition holding the largest excess).
@@ -132,11 +132,12 @@ def where_analysis(
     out: dict[str, Any] = {
         "residual": "12-parameter calibration fitted on the training blocks",
         "axis_rms_nt": [round(_rms1(r[h, k]), 3) for k in range(3)],
-        "vector_rms_nt": round(_rms(r[h]), 3),
+        "rms_nt": round(_rms1(r[h]), 3),
+        "norm_rms_nt": round(_rms(r[h]), 3),
         "scalar_rms_nt": round(_rms1(par_h), 3),
         "perpendicular_rms_nt": round(_rms(perp_h), 3),
     }
-    out["scalar_to_vector"] = round(out["scalar_rms_nt"] / max(out["vector_rms_nt"], 1e-12), 4)
+    out["scalar_to_vector"] = round(out["scalar_rms_nt"] / max(out["norm_rms_nt"], 1e-12), 4)
 
     amlat = np.abs(data.mlat_deg)
     bands: list[dict[str, Any]] = []

@@ -36,12 +36,9 @@ from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
-from scipy.spatial.transform import Rotation
-
-from orbitcal import frames
 
 if TYPE_CHECKING:  # pragma: no cover
-    from orbitcal.simulate.world import WorldState
+    from orbitcal.simulate.state import WorldState
 
 __all__ = [
     "EFFECTS",
@@ -222,6 +219,8 @@ class ExternalFieldEffect(Effect):
     scale: float = 1.0
 
     def inject(self, state: WorldState, rng: np.random.Generator) -> Injection:
+        from orbitcal import frames
+
         t = state.t_utc_s
         if self.model.upper() == "RC":
             from orbitcal.field import get_field
@@ -250,6 +249,7 @@ class CrustalFieldEffect(Effect):
     scale: float = 1.0
 
     def inject(self, state: WorldState, rng: np.random.Generator) -> Injection:
+        from orbitcal import frames
         from orbitcal.field import get_field
 
         radius, colat, lon = frames.itrs_to_spherical(state.r_itrs_km)
@@ -310,14 +310,19 @@ class OrbitErrorEffect(Effect):
     true_tle: str | None = None
 
     def inject(self, state: WorldState, rng: np.random.Generator) -> Injection:
+        from orbitcal import frames
+
         t = state.t_utc_s
         v = state.v_gcrs_km_s
         speed = np.linalg.norm(v, axis=1)
         if self.true_tle:
-            from orbitcal.simulate.world import kinematics, select_tle
+            from orbitcal.orbit import select_orbit
+            from orbitcal.simulate.state import kinematics
 
             norad = state.tle.norad_id if state.tle is not None else None
-            true_set = select_tle(self.true_tle, norad_id=norad, at_utc_s=float(t[0]))
+            true_set = select_orbit(
+                self.true_tle, norad_id=norad, at_utc_s=float(t[0]), prefer_past=True
+            )
             r_true_itrs = kinematics(true_set, state.attitude, t).r_itrs_km
             r_true_gcrs = frames.itrs_to_gcrs(r_true_itrs, t)
         else:
@@ -386,6 +391,8 @@ class FieldAlignedCurrentsEffect(Effect):
     width_deg: float = 2.5
 
     def inject(self, state: WorldState, rng: np.random.Generator) -> Injection:
+        from orbitcal import frames
+
         r = state.r_itrs_km
         z_dip = dipole_axis_itrs()
         mlat = magnetic_latitude_deg(r)
@@ -429,6 +436,8 @@ class AttitudeErrorEffect(Effect):
     bias_deg: tuple[float, ...] = (0.0, 0.0, 0.0)
 
     def inject(self, state: WorldState, rng: np.random.Generator) -> Injection:
+        from scipy.spatial.transform import Rotation
+
         t = state.t_utc_s - (state.t_utc_s[0] if state.t_utc_s.size else 0.0)
         phases = rng.uniform(0.0, 2 * np.pi, 3)
         periods = float(self.period_s) * np.array([1.0, 1.3, 0.7])
