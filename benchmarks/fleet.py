@@ -12,7 +12,13 @@ Workers: ``--workers K`` runs K processes pulling jobs (as K Celery worker proce
 time per spacecraft, throughput and peak memory per worker process are reported, with the
 projected time for the fleet on N workers.
 
-Usage: ``python benchmarks/fleet.py [--spacecraft 1000] [--workers 1 2] [--out FILE]``.
+Methods: ``--methods linear lmbp-hk``: per method, a first calibration of the whole fleet, then
+the same workload (every spacecraft retrained against its champion) with each ``--workers``
+count in turn, so the scale-out from one to two worker processes is measured on identical jobs.
+The per-retraining cost distribution (p10, median, p90, p99, max) is reported per run.
+
+Usage: ``python benchmarks/fleet.py [--spacecraft 1000] [--workers 1 2]
+[--methods linear lmbp-hk] [--out FILE]``.
 """
 
 from __future__ import annotations
@@ -92,7 +98,7 @@ def _setup(url: str, n: int, seed: int) -> list[str]:
     return jobs
 
 
-def _new_jobs(url: str) -> list[str]:
+def _new_jobs(url: str, method: str) -> list[str]:
     import sqlalchemy as sa
 
     from service.jobs import create_job
@@ -100,7 +106,7 @@ def _new_jobs(url: str) -> list[str]:
     from service.storage import Spacecraft, make_engine, read_tx
 
     engine = make_engine(url)
-    settings = Settings(database_url=url, method="linear", window_s=DAY_S)
+    settings = Settings(database_url=url, method=method, window_s=DAY_S)
     with read_tx(engine) as conn:
         pks = conn.execute(sa.select(Spacecraft.pk).order_by(Spacecraft.pk)).scalars().all()
     jobs = [create_job(engine, settings, pk, trigger="benchmark")[0] for pk in pks]
@@ -108,7 +114,7 @@ def _new_jobs(url: str) -> list[str]:
     return jobs
 
 
-def _worker(url: str, job_ids: list[str], out: Any) -> None:
+def _worker(url: str, method: str, job_ids: list[str], out: Any) -> None:
     import torch
 
     torch.set_num_threads(1)
@@ -117,7 +123,7 @@ def _worker(url: str, job_ids: list[str], out: Any) -> None:
     from service.storage import make_engine
 
     engine = make_engine(url, sqlite_synchronous="NORMAL")
-    settings = Settings(database_url=url, method="linear", window_s=DAY_S)
+    settings = Settings(database_url=url, method=method, window_s=DAY_S)
     import orbitcal.pipeline  # noqa: F401  (imports are not part of a job's cost)
 
     rss_before_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
@@ -133,11 +139,11 @@ def _worker(url: str, job_ids: list[str], out: Any) -> None:
     out.put((times, statuses, maxrss_mb, rss_before_mb, start, end))
 
 
-def run(url: str, jobs: list[str], workers: int) -> dict[str, Any]:
+def run(url: str, method: str, jobs: list[str], workers: int) -> dict[str, Any]:
     ctx = mp.get_context("spawn")
     q = ctx.Queue()
     shares = [jobs[k::workers] for k in range(workers)]
-    procs = [ctx.Process(target=_worker, args=(url, s, q)) for s in shares]
+    procs = [ctx.Process(target=_worker, args=(url, method, s, q)) for s in shares]
     t0 = time.perf_counter()
     for p in procs:
         p.start()
@@ -154,6 +160,8 @@ def run(url: str, jobs: list[str], workers: int) -> dict[str, Any]:
         "wall_s": wall,
         "per_job_median_s": float(np.median(times)),
         "per_job_p95_s": float(np.percentile(times, 95)),
+        "per_job_pct_s": [float(np.percentile(times, q)) for q in (10, 50, 90, 99, 100)],
+        "method": method,
         "jobs_s": busy,
         "throughput_per_s": len(jobs) / busy,
         "succeeded": statuses.count("succeeded"),
@@ -166,6 +174,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--spacecraft", type=int, default=1000)
     ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--methods", nargs="+", default=["linear", "lmbp-hk"])
     ap.add_argument("--database", help="SQLAlchemy URL (default: a SQLite file in a temp dir)")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--out", type=Path)
@@ -180,35 +189,50 @@ def main() -> None:
     setup_s = time.perf_counter() - t0
     print(f"setup: {setup_s:.1f} s", flush=True)
     rows = []
-    for k, workers in enumerate(args.workers):
-        if k:
-            jobs = _new_jobs(url)  # retrain the whole fleet again: challenger vs champion
-        r = run(url, jobs, workers)
-        r["kind"] = "first calibration" if k == 0 else "retraining vs champion"
+    for method in args.methods:
+        if rows:
+            jobs = _new_jobs(url, method)
+        r = run(url, method, jobs, 1)
+        r["kind"] = "first calibration" if not rows else "first retraining with this method"
         rows.append(r)
         print(r, flush=True)
+        for workers in args.workers:
+            # the same workload for each worker count: the whole fleet against its champion
+            r = run(url, method, _new_jobs(url, method), workers)
+            r["kind"] = "retraining vs champion"
+            rows.append(r)
+            print(r, flush=True)
     lines = [
         f"machine: {platform.machine()}, {os.cpu_count()} cores, shared; 1-min load average "
         f"{load_before:.1f} before, {os.getloadavg()[0]:.1f} after; Python "
         f"{platform.python_version()}; database "
         f"{'SQLite (WAL)' if not args.database else 'given URL'}",
         f"fleet: {args.spacecraft} spacecraft × 1 day at 0.1 Hz ({int(DAY_S / CADENCE_S)} samples "
-        "each), method linear, IGRF-14, TLE propagated per retraining",
+        f"each), methods {', '.join(args.methods)}, IGRF-14, TLE propagated per retraining",
         "",
         f"setup (simulation and bulk insert of {args.spacecraft * int(DAY_S / CADENCE_S):,} "
         f"samples): {setup_s:.0f} s",
         "",
-        "| run | worker processes | spacecraft | succeeded | jobs span [s] "
-        "| per retraining median / p95 [s] | retrainings/s "
+        "| method | run | worker processes | spacecraft | succeeded | jobs span [s] "
+        "| per retraining p10 / p50 / p90 / p99 / max [s] | retrainings/s "
         "| RSS per worker after imports / peak [MB] |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in rows:
+        pct = " / ".join(f"{x:.3f}" for x in r["per_job_pct_s"])
         lines.append(
-            f"| {r['kind']} | {r['workers']} | {r['n']} | {r['succeeded']} | {r['jobs_s']:.1f} | "
-            f"{r['per_job_median_s']:.3f} / {r['per_job_p95_s']:.3f} | "
-            f"{r['throughput_per_s']:.2f} | {r['rss_before_mb']:.0f} / {r['maxrss_mb']:.0f} |"
+            f"| {r['method']} | {r['kind']} | {r['workers']} | {r['n']} | {r['succeeded']} "
+            f"| {r['jobs_s']:.1f} | {pct} | {r['throughput_per_s']:.2f} "
+            f"| {r['rss_before_mb']:.0f} / {r['maxrss_mb']:.0f} |"
         )
+    for method in args.methods:
+        same = [r for r in rows if r["method"] == method and r["kind"] == "retraining vs champion"]
+        if len(same) >= 2:
+            lines.append(
+                f"\nscale-out, {method}: {same[0]['workers']} -> {same[-1]['workers']} worker "
+                f"processes, {same[-1]['throughput_per_s'] / same[0]['throughput_per_s']:.2f}× "
+                "the retrainings per second on the same jobs"
+            )
     best = max(rows, key=lambda r: r["throughput_per_s"])
     per_core = best["per_job_median_s"]
     lines += [

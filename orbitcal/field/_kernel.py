@@ -9,13 +9,16 @@ imported; the numpy path is then used.
 
 from __future__ import annotations
 
+import contextlib
 import math
+import os
+import threading
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["HAVE_NUMBA", "synth_pp_nec_nt"]
+__all__ = ["HAVE_NUMBA", "max_threads", "synth_pp_nec_nt"]
 
 try:  # pragma: no cover - exercised by whichever branch is installed
     import numba
@@ -29,20 +32,8 @@ _EARTH_REFERENCE_RADIUS_KM = 6371.2  # same constant as orbitcal.field.synthesis
 _POLE_EPS_RAD = 1e-9
 
 
-def _kernel(
-    pp: NDArray[np.float64],
-    piece: NDArray[np.int64],
-    dt: NDArray[np.float64],
-    radius_km: NDArray[np.float64],
-    colat_rad: NDArray[np.float64],
-    lon_rad: NDArray[np.float64],
-    nmin: int,
-    nmax: int,
-    out: NDArray[np.float64],
-) -> None:
-    order = pp.shape[0]
-    n_pts = radius_km.shape[0]
-    # recursion constants
+def _constants(nmax: int) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Constants of the Schmidt recursion (Langel 1987, eqs. 4.7–4.9)."""
     width = nmax + 2
     a_c = np.zeros((nmax + 1, width))
     b_c = np.zeros((nmax + 1, width))
@@ -55,6 +46,28 @@ def _kernel(
                 b_c[n, m] = math.sqrt((n - 1) * (n - 1) - m * m) / den
         if n >= 2:
             d_c[n] = math.sqrt((2 * n - 1) / (2 * n))
+    return a_c, b_c, d_c
+
+
+def _kernel_range(
+    pp: NDArray[np.float64],
+    piece: NDArray[np.int64],
+    dt: NDArray[np.float64],
+    radius_km: NDArray[np.float64],
+    colat_rad: NDArray[np.float64],
+    lon_rad: NDArray[np.float64],
+    nmin: int,
+    nmax: int,
+    a_c: NDArray[np.float64],
+    b_c: NDArray[np.float64],
+    d_c: NDArray[np.float64],
+    start: int,
+    stop: int,
+    out: NDArray[np.float64],
+) -> None:
+    """Samples ``start:stop``, with scratch arrays of their own (one call per thread)."""
+    order = pp.shape[0]
+    width = nmax + 2
     # P[n, m] and dP/dθ[n, m] of the current sample, one row per degree (row n has a zero at
     # m = n + 1 so that the recursion may read P[n-2, m] for m up to n - 1 without a branch).
     pnm = np.zeros((nmax + 1, width))
@@ -62,7 +75,7 @@ def _kernel(
     cosm = np.zeros(nmax + 1)
     sinm = np.zeros(nmax + 1)
     coef = np.zeros(pp.shape[2])
-    for i in range(n_pts):
+    for i in range(start, stop):
         j = piece[i]
         d = dt[i]
         for k in range(coef.shape[0]):
@@ -127,14 +140,96 @@ def _kernel(
         out[i, 2] += -b_r
 
 
+def _kernel_serial(
+    pp: NDArray[np.float64],
+    piece: NDArray[np.int64],
+    dt: NDArray[np.float64],
+    radius_km: NDArray[np.float64],
+    colat_rad: NDArray[np.float64],
+    lon_rad: NDArray[np.float64],
+    nmin: int,
+    nmax: int,
+    out: NDArray[np.float64],
+) -> None:
+    a_c, b_c, d_c = _constants(nmax)
+    _range_fn(
+        pp, piece, dt, radius_km, colat_rad, lon_rad, nmin, nmax, a_c, b_c, d_c, 0,
+        radius_km.shape[0], out,
+    )  # fmt: skip
+
+
+def _kernel_parallel(
+    pp: NDArray[np.float64],
+    piece: NDArray[np.int64],
+    dt: NDArray[np.float64],
+    radius_km: NDArray[np.float64],
+    colat_rad: NDArray[np.float64],
+    lon_rad: NDArray[np.float64],
+    nmin: int,
+    nmax: int,
+    n_chunks: int,
+    out: NDArray[np.float64],
+) -> None:
+    a_c, b_c, d_c = _constants(nmax)
+    n_pts = radius_km.shape[0]
+    for c in _prange(n_chunks):
+        _range_fn(
+            pp, piece, dt, radius_km, colat_rad, lon_rad, nmin, nmax, a_c, b_c, d_c,
+            c * n_pts // n_chunks, (c + 1) * n_pts // n_chunks, out,
+        )  # fmt: skip
+
+
+_prange: Any = range
+_range_fn: Any = _kernel_range
 _compiled: Any = None
+_compiled_parallel: Any = None
 if HAVE_NUMBA:
     # fastmath without "nnan"/"ninf": reassociation lets the order sums vectorise; inputs stay IEEE.
     _FASTMATH = {"reassoc", "contract", "nsz", "arcp"}
-    try:
-        _compiled = numba.njit(cache=True, nogil=True, fastmath=_FASTMATH)(_kernel)
-    except RuntimeError:  # pragma: no cover - no writable cache location (read-only install)
-        _compiled = numba.njit(cache=False, nogil=True, fastmath=_FASTMATH)(_kernel)
+    _prange = numba.prange
+
+    def _jit(fn: Any, **kw: Any) -> Any:
+        try:
+            return numba.njit(
+                cache=True, nogil=True, fastmath=_FASTMATH, error_model="numpy", **kw
+            )(fn)
+        except RuntimeError:  # pragma: no cover - no writable cache location (read-only install)
+            return numba.njit(
+                cache=False, nogil=True, fastmath=_FASTMATH, error_model="numpy", **kw
+            )(fn)
+
+    _constants = _jit(_constants)
+    _range_fn = _jit(_kernel_range)
+    _compiled = _jit(_kernel_serial)
+    _compiled_parallel = _jit(_kernel_parallel, parallel=True)
+
+#: Below this many samples per thread the threads cost more than they save (one thread).
+MIN_SAMPLES_PER_THREAD = 20_000
+
+#: Chunks per thread: a thread slowed by another job on its core leaves work for the others.
+CHUNKS_PER_THREAD = 8
+
+# The parallel kernel is entered by one caller at a time (numba's default "workqueue" threading
+# layer is not safe for concurrent launches); a caller that finds it busy runs the serial kernel.
+_PARALLEL_LOCK = threading.Lock()
+
+
+def _numba_threads() -> int:
+    """Numba's thread pool size (``NUMBA_NUM_THREADS``, default: every core)."""
+    return int(numba.config.NUMBA_NUM_THREADS) if HAVE_NUMBA else 1  # type: ignore[attr-defined]
+
+
+def max_threads() -> int:
+    """Threads the parallel kernel may use: ``ORBITCAL_FIELD_THREADS`` if set, else every core
+    numba sees (bounded by numba's own ``NUMBA_NUM_THREADS``)."""
+    if not HAVE_NUMBA:
+        return 1
+    limit = _numba_threads()
+    env = os.environ.get("ORBITCAL_FIELD_THREADS")
+    if env:
+        with contextlib.suppress(ValueError):
+            return max(1, min(limit, int(env)))
+    return limit
 
 
 def synth_pp_nec_nt(
@@ -147,8 +242,14 @@ def synth_pp_nec_nt(
     *,
     nmin: int,
     nmax: int,
+    threads: int | None = None,
 ) -> NDArray[np.float64]:
     """Field of a piecewise-polynomial model, each sample at its own time (compiled).
+
+    Samples are independent, so they are split into chunks run in parallel on up to
+    ``threads`` cores (default :func:`max_threads`; at least :data:`MIN_SAMPLES_PER_THREAD`
+    samples per thread). Each sample's arithmetic is the serial kernel's: results do not depend
+    on the thread count.
 
     Parameters
     ----------
@@ -162,6 +263,8 @@ def synth_pp_nec_nt(
         Geocentric radius [km], colatitude [rad], longitude [rad].
     nmin, nmax : int
         Degree range.
+    threads : int, optional
+        Upper bound on the threads (1: the serial kernel).
 
     Returns
     -------
@@ -170,8 +273,9 @@ def synth_pp_nec_nt(
     """
     if _compiled is None:  # pragma: no cover
         raise RuntimeError("numba is not installed")
-    out = np.zeros((radius_km.shape[0], 3))
-    _compiled(
+    n_pts = radius_km.shape[0]
+    out = np.zeros((n_pts, 3))
+    args = (
         np.ascontiguousarray(pp_blocks, dtype=np.float64),
         np.ascontiguousarray(piece, dtype=np.int64),
         np.ascontiguousarray(dt_days, dtype=np.float64),
@@ -180,6 +284,19 @@ def synth_pp_nec_nt(
         np.ascontiguousarray(lon_rad, dtype=np.float64),
         int(nmin),
         int(nmax),
-        out,
     )
+    cap = max_threads() if threads is None else min(threads, _numba_threads())
+    n_threads = min(cap, n_pts // MIN_SAMPLES_PER_THREAD)
+    if n_threads >= 2 and _PARALLEL_LOCK.acquire(blocking=False):
+        try:
+            previous = numba.get_num_threads()
+            numba.set_num_threads(n_threads)
+            try:
+                _compiled_parallel(*args, n_threads * CHUNKS_PER_THREAD, out)
+            finally:
+                numba.set_num_threads(previous)
+        finally:
+            _PARALLEL_LOCK.release()
+        return out
+    _compiled(*args, out)
     return out
