@@ -14,6 +14,7 @@ by default) relative to a sample raise a :class:`StaleElementsWarning`.
 from __future__ import annotations
 
 import json
+import math
 import re
 import warnings
 from collections.abc import Mapping, Sequence
@@ -24,6 +25,7 @@ import numpy as np
 import numpy.typing as npt
 from sgp4.api import SGP4_ERRORS, WGS72, Satrec, SatrecArray
 
+from orbitcal.errors import OrbitProblemError
 from orbitcal.frames import teme_to_itrs
 
 __all__ = [
@@ -34,10 +36,15 @@ __all__ = [
     "OrbitError",
     "PropagationError",
     "Propagator",
+    "StaleElementsError",
     "StaleElementsWarning",
     "TLEError",
+    "check_epoch_near",
     "propagate_many",
+    "read_orbits",
+    "read_tle_sets",
     "require_valid",
+    "select_orbit",
     "tle_checksum",
 ]
 
@@ -53,8 +60,19 @@ _DAY_S = 86_400.0
 _TLE_LINE_LENGTH = 69
 
 
-class OrbitError(ValueError):
-    """Base class of orbit errors (bad elements or failed propagation)."""
+class OrbitError(OrbitProblemError):
+    """Base class of orbit errors (bad elements or failed propagation).
+
+    Attributes
+    ----------
+    field : str or None
+        The element at fault (an OMM keyword such as ``MEAN_MOTION``, or a TLE field such as
+        ``"eccentricity"``), when one is.
+    """
+
+    def __init__(self, message: str, *, field: str | None = None) -> None:
+        self.field = field
+        super().__init__(message)
 
 
 class TLEError(OrbitError):
@@ -72,6 +90,11 @@ class PropagationError(OrbitError):
         super().__init__(message)
         self.rows = rows
         self.codes = codes
+
+
+class StaleElementsError(OrbitError):
+    """The data lie further from the element set's epoch than the allowed age (see
+    :data:`DEFAULT_MAX_AGE_DAYS`); use elements nearer the data or accept them explicitly."""
 
 
 class StaleElementsWarning(UserWarning):
@@ -185,6 +208,126 @@ def _validate_tle_fields(line1: str, line2: str) -> None:
             )
 
 
+# Physical ranges of the mean elements (CCSDS 502.0-B-3 OMM; CelesTrak's TLE format): name of the
+# element in words, lower and upper bound, whether the upper bound itself is allowed.
+_ELEMENT_RANGES: tuple[tuple[str, str, float, float, bool], ...] = (
+    ("MEAN_MOTION", "mean motion [rev/day]", 0.0, 20.0, True),
+    ("ECCENTRICITY", "eccentricity", 0.0, 1.0, False),
+    ("INCLINATION", "inclination [deg]", 0.0, 180.0, True),
+    ("RA_OF_ASC_NODE", "right ascension of the ascending node [deg]", 0.0, 360.0, True),
+    ("ARG_OF_PERICENTER", "argument of perigee [deg]", 0.0, 360.0, True),
+    ("MEAN_ANOMALY", "mean anomaly [deg]", 0.0, 360.0, True),
+)
+# Integer fields and the largest value their TLE column width holds (CelesTrak TLE format; the
+# NORAD number up to Alpha-5 'Z9999', the largest that SGP4 takes).
+_INTEGER_FIELDS: tuple[tuple[str, str, int], ...] = (
+    ("NORAD_CAT_ID", "NORAD catalogue number", 339_999),
+    ("ELEMENT_SET_NO", "element set number (4 digits)", 9_999),
+    ("REV_AT_EPOCH", "revolution number at epoch (5 digits)", 99_999),
+    ("EPHEMERIS_TYPE", "ephemeris type (1 digit)", 9),
+)
+# Drag-like terms: finite and representable in the TLE's fixed columns (|x| < 1).
+_SMALL_TERMS: tuple[tuple[str, str], ...] = (
+    ("BSTAR", "BSTAR drag term [1/earth radii]"),
+    ("MEAN_MOTION_DOT", "first derivative of mean motion [rev/day²]"),
+    ("MEAN_MOTION_DDOT", "second derivative of mean motion [rev/day³]"),
+)
+# The element SGP4's initialisation errors point at (sgp4.api.SGP4_ERRORS; Vallado et al. 2006):
+# 1 mean eccentricity/semi-major axis, 2 mean motion < 0, 3 perturbed eccentricity, 4 semi-latus
+# rectum < 0, 6 decayed (radius below the Earth's at epoch: the mean motion puts it inside).
+_SGP4_ERROR_FIELDS = {
+    1: "ECCENTRICITY",
+    2: "MEAN_MOTION",
+    3: "ECCENTRICITY",
+    4: "MEAN_MOTION",
+    6: "MEAN_MOTION",
+}
+
+
+def _init_error(satrec: Satrec, label: str, error: type[OrbitError]) -> OrbitError:
+    code = int(satrec.error)
+    what = SGP4_ERRORS.get(code, "unknown")
+    field = _SGP4_ERROR_FIELDS.get(code)
+    hint = (
+        f": the elements describe a decayed (re-entered) object (check {field})"
+        if code == 6
+        else f" (check {field})"
+        if field
+        else ""
+    )
+    return error(
+        f"{label} elements rejected by SGP4 initialisation: error {code} ({what}){hint}",
+        field=field,
+    )
+
+
+def _check_element_values(values: Mapping[str, float], label: str, error: type[OrbitError]) -> None:
+    """Refuse non-finite and out-of-range mean elements, naming the field.
+
+    ``values`` maps OMM keywords (the TLE's fields translated) to numbers; ``label`` prefixes the
+    message (``"OMM"``, ``"TLE"``).
+    """
+    for key, words, lo, hi, hi_ok in _ELEMENT_RANGES:
+        if key not in values:
+            continue
+        x = values[key]
+        inside = math.isfinite(x) and (x > lo if key == "MEAN_MOTION" else x >= lo)
+        inside = inside and (x <= hi if hi_ok else x < hi)
+        if not inside:
+            bound = (
+                f"> {lo:g}" if key == "MEAN_MOTION" else f"≥ {lo:g}"
+            ) + f" and {'≤' if hi_ok else '<'} {hi:g}"
+            raise error(f"{label} {key} ({words}) is {x!r}; it must be finite, {bound}", field=key)
+    for key, words in _SMALL_TERMS:
+        if key in values and not (math.isfinite(values[key]) and abs(values[key]) < 1.0):
+            raise error(
+                f"{label} {key} ({words}) is {values[key]!r}; it must be finite with |x| < 1",
+                field=key,
+            )
+
+
+def _check_integer_fields(texts: Mapping[str, str], label: str, error: type[OrbitError]) -> None:
+    for key, words, largest in _INTEGER_FIELDS:
+        if key not in texts:
+            continue
+        text = texts[key].strip()
+        if not (text.isdigit() and text.isascii()):
+            raise error(
+                f"{label} {key} ({words}) is {text[:40]!r}; it must be a whole number 0…{largest}",
+                field=key,
+            )
+        if len(text) > 12 or int(text) > largest:
+            raise error(
+                f"{label} {key} ({words}) is {text[:40]}; the largest allowed is {largest}",
+                field=key,
+            )
+
+
+def _tle_values(line1: str, line2: str) -> dict[str, float]:
+    """The TLE's elements under their OMM keywords (fixed columns; format already validated)."""
+
+    def exp_field(text: str) -> float:
+        text = text.strip()
+        if not text or text in {"0", "00000-0", "00000+0"}:
+            return 0.0
+        mantissa, exponent = text[:-2].replace(" ", ""), text[-2:]
+        sign = -1.0 if mantissa.startswith("-") else 1.0
+        digits = mantissa.lstrip("+-") or "0"
+        return sign * float("0." + digits) * 10.0 ** int(exponent)
+
+    return {
+        "INCLINATION": float(line2[8:16]),
+        "RA_OF_ASC_NODE": float(line2[17:25]),
+        "ECCENTRICITY": float("0." + line2[26:33].strip()),
+        "ARG_OF_PERICENTER": float(line2[34:42]),
+        "MEAN_ANOMALY": float(line2[43:51]),
+        "MEAN_MOTION": float(line2[52:63]),
+        "MEAN_MOTION_DOT": float(line1[33:43]),
+        "MEAN_MOTION_DDOT": exp_field(line1[44:52]),
+        "BSTAR": exp_field(line1[53:61]),
+    }
+
+
 def _check_age(epoch_utc_s: float, t: FloatArray, max_age_days: float | None, what: str) -> None:
     if max_age_days is None or t.size == 0:
         return
@@ -262,6 +405,21 @@ class Orbit:
         line1, line2 = export_tle(self.satrec)
         return line1, line2
 
+    @property
+    def line1(self) -> str:
+        """TLE line 1 (see :attr:`tle_lines`)."""
+        return self.tle_lines[0]
+
+    @property
+    def line2(self) -> str:
+        """TLE line 2 (see :attr:`tle_lines`)."""
+        return self.tle_lines[1]
+
+    @property
+    def text(self) -> str:
+        """The element set as TLE text (:meth:`to_tle_text`)."""
+        return self.to_tle_text()
+
     def to_tle_text(self) -> str:
         """Name line (if any) and the two lines, newline-terminated, as ``from_tle`` reads it."""
         lines = [self.name] if self.name else []
@@ -304,6 +462,7 @@ class Orbit:
         _validate_tle_line(line1, 1, verify_checksum=verify_checksum)
         _validate_tle_line(line2, 2, verify_checksum=verify_checksum)
         _validate_tle_fields(line1, line2)
+        _check_element_values(_tle_values(line1, line2), "TLE", TLEError)
         if line1[2:7] != line2[2:7]:
             raise TLEError(
                 f"TLE line 1 is for catalogue number {line1[2:7]!r} but line 2 for {line2[2:7]!r}"
@@ -313,10 +472,7 @@ class Orbit:
         except (ValueError, IndexError) as exc:  # pragma: no cover - sgp4 rarely raises
             raise TLEError(f"TLE could not be read by SGP4: {exc}") from exc
         if satrec.error:
-            raise TLEError(
-                f"TLE elements rejected by SGP4 initialisation: error {satrec.error} "
-                f"({SGP4_ERRORS.get(satrec.error, 'unknown')})"
-            )
+            raise _init_error(satrec, "TLE", TLEError)
         return cls._from_satrec(satrec, name if name is not None else title, ("tle", line1, line2))
 
     @classmethod
@@ -363,18 +519,38 @@ class Orbit:
             epoch += ".0"
         if epoch:
             texts["EPOCH"] = epoch
+        values: dict[str, float] = {}
+        for key in (*(r[0] for r in _ELEMENT_RANGES), *(t[0] for t in _SMALL_TERMS)):
+            if key not in texts:
+                raise OMMError(f"OMM lacks the field {key}", field=key)
+            if len(texts[key]) > 64:
+                raise OMMError(f"OMM {key} is {len(texts[key])} characters long", field=key)
+            try:
+                values[key] = float(texts[key])
+            except ValueError:
+                raise OMMError(
+                    f"OMM {key} is {texts[key][:40]!r}, not a number", field=key
+                ) from None
+        if "NORAD_CAT_ID" not in texts:
+            raise OMMError("OMM lacks the field NORAD_CAT_ID", field="NORAD_CAT_ID")
+        _check_integer_fields(texts, "OMM", OMMError)
+        _check_element_values(values, "OMM", OMMError)
+        if len(texts["CLASSIFICATION_TYPE"].strip()) > 1:
+            raise OMMError(
+                f"OMM CLASSIFICATION_TYPE is {texts['CLASSIFICATION_TYPE'][:40]!r}; one letter "
+                "(U, C or S)",
+                field="CLASSIFICATION_TYPE",
+            )
         satrec = Satrec()
         try:
             omm.initialize(satrec, texts)
         except KeyError as exc:
-            raise OMMError(f"OMM lacks the field {exc.args[0]}") from exc
-        except ValueError as exc:
-            raise OMMError(f"OMM has a malformed value: {exc}") from exc
+            raise OMMError(f"OMM lacks the field {exc.args[0]}", field=str(exc.args[0])) from exc
+        except (ValueError, OverflowError) as exc:
+            field = "EPOCH" if "time data" in str(exc) or "does not match" in str(exc) else None
+            raise OMMError(f"OMM has a malformed value: {exc}", field=field) from exc
         if satrec.error:
-            raise OMMError(
-                f"OMM elements rejected by SGP4 initialisation: error {satrec.error} "
-                f"({SGP4_ERRORS.get(satrec.error, 'unknown')})"
-            )
+            raise _init_error(satrec, "OMM", OMMError)
         title = name if name is not None else texts.get("OBJECT_NAME", "")
         return cls._from_satrec(satrec, title, ("omm", json.dumps(texts, sort_keys=True)))
 
@@ -430,6 +606,195 @@ def _orbit_from_source(source: tuple[str, ...], name: str) -> Orbit:
     if source and source[0] == "omm":
         return Orbit.from_omm(json.loads(source[1]), name=name)
     raise OrbitError("this Orbit has no recorded source (TLE or OMM) and cannot be rebuilt")
+
+
+def read_tle_sets(text: str, *, verify_checksum: bool = True) -> list[Orbit]:
+    """Every element set of a TLE file (2-line or 3-line entries, in file order).
+
+    Each set is read by :meth:`Orbit.from_tle` (layout, checksums, physical ranges); a bad set
+    raises :class:`TLEError` naming its place in the file.
+
+    Raises
+    ------
+    TLEError
+        No set found, or a set is malformed (the message says which: "set 3 (line 7): ...").
+    """
+    if not isinstance(text, str):
+        raise TLEError(f"a TLE file must be text, got {type(text).__name__}")
+    lines = [(k + 1, ln.rstrip()) for k, ln in enumerate(text.splitlines()) if ln.strip()]
+    out: list[Orbit] = []
+    i = 0
+    name = ""
+    while i < len(lines):
+        number, ln = lines[i]
+        if ln.startswith("1 ") and i + 1 < len(lines) and lines[i + 1][1].startswith("2 "):
+            try:
+                out.append(
+                    Orbit.from_tle(
+                        f"{ln}\n{lines[i + 1][1]}",
+                        name=name.strip(),
+                        verify_checksum=verify_checksum,
+                    )
+                )
+            except TLEError as exc:
+                raise TLEError(
+                    f"set {len(out) + 1} (line {number}): {exc}", field=exc.field
+                ) from None
+            name = ""
+            i += 2
+        else:
+            name = ln[2:] if ln.startswith("0 ") else ln
+            i += 1
+    if not out:
+        raise TLEError("no two-line element set found (lines starting '1 ' and '2 ')")
+    return out
+
+
+def select_orbit(
+    orbits: Sequence[Orbit] | str,
+    *,
+    norad_id: int | None = None,
+    at_utc_s: float | tuple[float, float] | None = None,
+    prefer_past: bool = False,
+) -> Orbit:
+    """One spacecraft's element set nearest in epoch to a time or a span.
+
+    Parameters
+    ----------
+    orbits : sequence of Orbit, or str
+        Element sets (or a TLE file's text, read by :func:`read_tle_sets`).
+    norad_id : int or None, keyword-only
+        Catalogue number; required when the sets are of more than one spacecraft.
+    at_utc_s : float, (float, float) or None, keyword-only
+        A time or a (first, last) span of the data, POSIX seconds of UTC [s]; None picks the
+        latest epoch. For a span, the distance of an epoch is zero inside it.
+    prefer_past : bool, keyword-only
+        Take the latest epoch not after the (start of the) time when there is one, as an operator
+        would have had at that time (the simulator); else the nearest epoch.
+
+    Raises
+    ------
+    OrbitError
+        Several spacecraft and no ``norad_id``, or none of that number.
+    """
+    sets = read_tle_sets(orbits) if isinstance(orbits, str) else list(orbits)
+    if not sets:
+        raise OrbitError("no element sets given")
+    ids = sorted({o.norad_id for o in sets})
+    if norad_id is None:
+        if len(ids) > 1:
+            raise OrbitError(
+                f"the element sets are of {len(ids)} spacecraft ({', '.join(map(str, ids))}): "
+                "name one with --norad",
+                field="norad",
+            )
+        norad_id = ids[0]
+    mine = [o for o in sets if o.norad_id == norad_id]
+    if not mine:
+        raise OrbitError(
+            f"no element set for NORAD {norad_id} (the sets are of {', '.join(map(str, ids))})",
+            field="norad",
+        )
+    epochs = np.array([o.epoch_utc_s for o in mine])
+    if at_utc_s is None:
+        return mine[int(np.argmax(epochs))]
+    first, last = (at_utc_s, at_utc_s) if isinstance(at_utc_s, float | int) else at_utc_s
+    if prefer_past:
+        before = np.flatnonzero(epochs <= first)
+        if before.size:
+            return mine[int(before[np.argmax(epochs[before])])]
+    distance = np.maximum(np.maximum(first - epochs, epochs - last), 0.0)
+    return mine[int(np.argmin(distance))]
+
+
+def _omm_records(text: str, path: str) -> list[dict[str, str]]:
+    import io
+
+    from sgp4 import omm
+
+    stripped = text.lstrip()
+    try:
+        if stripped.startswith("<"):
+            return list(omm.parse_xml(io.StringIO(text)))
+        if stripped.startswith(("[", "{")):
+            data = json.loads(text)
+            records = data if isinstance(data, list) else [data]
+            if not all(isinstance(r, dict) for r in records):
+                raise OMMError(f"{path}: a JSON OMM file holds objects (or a list of them)")
+            return records
+        return list(omm.parse_csv(io.StringIO(text)))
+    except OMMError:
+        raise
+    except Exception as exc:  # the XML/CSV/JSON parsers' own errors: a malformed file
+        raise OMMError(f"{path}: not a readable OMM file ({type(exc).__name__}: {exc})") from None
+
+
+def read_orbits(text: str, *, path: str = "elements") -> list[Orbit]:
+    """Every element set of a TLE file or a CCSDS OMM file (XML, JSON or CSV), in file order.
+
+    The format is recognised from the text: lines starting ``1 `` and ``2 `` are a TLE file; a
+    leading ``<`` is OMM XML; ``[`` or ``{`` is OMM JSON (CelesTrak's ``FORMAT=json``); a header
+    line naming ``MEAN_MOTION`` is OMM CSV. OMM records are read by :meth:`Orbit.from_omm`.
+
+    Raises
+    ------
+    TLEError, OMMError
+        Naming the file, the record and the field.
+    """
+    stripped = text.lstrip()
+    first = stripped.splitlines()[0] if stripped else ""
+    if stripped.startswith(("<", "[", "{")) or "MEAN_MOTION" in first.upper():
+        records = _omm_records(text, path)
+        if not records:
+            raise OMMError(f"{path}: no OMM record found")
+        orbits = []
+        for k, record in enumerate(records):
+            try:
+                orbits.append(Orbit.from_omm(record))
+            except OMMError as exc:
+                raise OMMError(f"{path}: record {k + 1}: {exc}", field=exc.field) from None
+        return orbits
+    try:
+        return read_tle_sets(text)
+    except TLEError as exc:
+        raise TLEError(f"{path}: {exc}", field=exc.field) from None
+
+
+def check_epoch_near(
+    orbit: Orbit,
+    t_utc_s: npt.ArrayLike,
+    *,
+    max_age_days: float = DEFAULT_MAX_AGE_DAYS,
+) -> float:
+    """The largest distance [d] of the samples from the element epoch; raise beyond the limit.
+
+    SGP4 elements of a LEO spacecraft are good to about a kilometre at epoch and degrade by
+    kilometres per day (Vallado et al. 2006), so data further than ``max_age_days`` (default
+    :data:`DEFAULT_MAX_AGE_DAYS` = 14 days) from the epoch are refused unless the caller accepts
+    them (the CLI's ``--allow-stale-elements``).
+
+    Raises
+    ------
+    StaleElementsError
+        Naming the spacecraft, the epoch, the distance and the limit.
+    """
+    t = np.asarray(t_utc_s, dtype=np.float64)
+    t = t[np.isfinite(t)]
+    if t.size == 0:
+        return 0.0
+    age_d = float(np.max(np.abs(t - orbit.epoch_utc_s))) / _DAY_S
+    if age_d > max_age_days:
+        from orbitcal.timescales import utc_s_to_iso
+
+        epoch = utc_s_to_iso([orbit.epoch_utc_s])[0][:19]
+        raise StaleElementsError(
+            f"the element set of NORAD {orbit.norad_id} (epoch {epoch}Z) is {age_d:.1f} days from "
+            f"the data, more than {max_age_days:g} days: SGP4 errors grow by km per day. Give "
+            "elements nearer the data (a file of many sets: the nearest is picked), positions "
+            "(r_x, r_y, r_z), or --allow-stale-elements",
+            field="epoch",
+        )
+    return age_d
 
 
 def propagate_many(

@@ -13,15 +13,22 @@ from sgp4.api import Satrec
 from sgp4.exporter import export_omm
 
 from orbitcal import frames
+from orbitcal.errors import OrbitProblemError
 from orbitcal.orbit import (
     Ephemeris,
     OMMError,
     Orbit,
+    OrbitError,
     PropagationError,
+    StaleElementsError,
     StaleElementsWarning,
     TLEError,
+    check_epoch_near,
     propagate_many,
+    read_orbits,
+    read_tle_sets,
     require_valid,
+    select_orbit,
     tle_checksum,
 )
 
@@ -248,3 +255,121 @@ def test_orbit_pickles_and_writes_its_tle() -> None:
     t = orbit.epoch_utc_s + np.arange(0.0, 3600.0, 60.0)
     np.testing.assert_array_equal(again.propagate(t).r_teme_km, omm.propagate(t).r_teme_km)
     assert Orbit.from_tle(omm.to_tle_text()).norad_id == 39452
+
+
+# --- one parser for TLE and OMM files; physical validation (issue 10 item 4, issue 11 item 7) ----
+
+REAL_TLES = Path(__file__).resolve().parent / "authorities" / "swarm_iss_real_tles.tle"
+
+
+def _swarm_a_omm() -> dict[str, str]:
+    orbit = select_orbit(REAL_TLES.read_text(), norad_id=39452, at_utc_s=1_659_398_400.0)
+    return {k: str(v) for k, v in export_omm(orbit.satrec, "SWARM A").items()}
+
+
+def test_read_orbits_reads_tle_and_omm_json_csv_xml_alike() -> None:
+    import csv
+    import io
+    import json
+
+    fields = _swarm_a_omm()
+    ref = Orbit.from_omm(fields)
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=list(fields))
+    writer.writeheader()
+    writer.writerow(fields)
+    meta_keys = {"OBJECT_NAME", "OBJECT_ID", "CENTER_NAME", "REF_FRAME", "TIME_SYSTEM"}
+    mean_keys = {"EPOCH", "MEAN_MOTION", "ECCENTRICITY", "INCLINATION", "RA_OF_ASC_NODE"}
+    mean_keys |= {"ARG_OF_PERICENTER", "MEAN_ANOMALY"}
+
+    def tags(keys: set[str]) -> str:
+        return "".join(f"<{k}>{v}</{k}>" for k, v in fields.items() if k in keys)
+
+    rest = set(fields) - meta_keys - mean_keys
+    xml = (  # the CCSDS NDM/XML layout CelesTrak serves (FORMAT=xml)
+        '<?xml version="1.0"?><ndm><omm><body><segment>'
+        f"<metadata>{tags(meta_keys)}</metadata><data><meanElements>{tags(mean_keys)}"
+        f"</meanElements><tleParameters>{tags(rest)}</tleParameters></data>"
+        "</segment></body></omm></ndm>"
+    )
+    for text in (json.dumps([fields]), json.dumps(fields), buf.getvalue(), xml):
+        (orbit,) = read_orbits(text)
+        assert orbit.norad_id == 39452
+        assert abs(orbit.epoch_utc_s - ref.epoch_utc_s) < 1e-5
+    tles = read_orbits(REAL_TLES.read_text())
+    assert len(tles) == 56 and {o.norad_id for o in tles} == {25544, 39451, 39452, 39453}
+
+
+def test_select_orbit_takes_the_set_nearest_the_data() -> None:
+    sets = read_tle_sets(REAL_TLES.read_text())
+    swarm_a = sorted((o for o in sets if o.norad_id == 39452), key=lambda o: o.epoch_utc_s)
+    target = swarm_a[len(swarm_a) // 2]
+    span = (target.epoch_utc_s + 3600.0, target.epoch_utc_s + 7200.0)
+    chosen = select_orbit(sets, norad_id=39452, at_utc_s=span)
+    distances = [min(abs(o.epoch_utc_s - span[0]), abs(o.epoch_utc_s - span[1])) for o in swarm_a]
+    assert chosen.epoch_utc_s == swarm_a[int(np.argmin(distances))].epoch_utc_s
+    with pytest.raises(OrbitError, match="--norad"):
+        select_orbit(sets, at_utc_s=span)
+    with pytest.raises(OrbitError, match="no element set for NORAD 1"):
+        select_orbit(sets, norad_id=1)
+
+
+def test_stale_elements_are_refused_with_the_distance() -> None:
+    orbit = Orbit.from_tle(SWARM_A)
+    assert check_epoch_near(orbit, [orbit.epoch_utc_s + 86400.0]) == pytest.approx(1.0)
+    with pytest.raises(StaleElementsError, match=r"20\.0 days from the data, more than 14") as e:
+        check_epoch_near(orbit, [orbit.epoch_utc_s - 20 * 86400.0])
+    assert e.value.field == "epoch" and isinstance(e.value, OrbitProblemError)
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "words"),
+    [
+        ("MEAN_MOTION", "nan", "must be finite"),
+        ("MEAN_MOTION", "-15.3", "> 0"),
+        ("MEAN_MOTION", "0", "> 0"),
+        ("MEAN_MOTION", "inf", "must be finite"),
+        ("ECCENTRICITY", "1.0", "< 1"),
+        ("ECCENTRICITY", "-0.001", "≥ 0"),
+        ("INCLINATION", "180.5", "≤ 180"),
+        ("RA_OF_ASC_NODE", "1e308", "≤ 360"),
+        ("MEAN_ANOMALY", "x", "not a number"),
+        ("BSTAR", "1e30", "|x| < 1"),
+        ("ELEMENT_SET_NO", str(10**30), "largest allowed is 9999"),
+        ("ELEMENT_SET_NO", "-1", "whole number"),
+        ("REV_AT_EPOCH", "100000", "largest allowed is 99999"),
+        ("NORAD_CAT_ID", "340000", "largest allowed is 339999"),
+        ("NORAD_CAT_ID", "1e3", "whole number"),
+        ("CLASSIFICATION_TYPE", "UU", "one letter"),
+    ],
+)
+def test_unphysical_omm_values_name_the_field(key: str, value: str, words: str) -> None:
+    fields = _swarm_a_omm()
+    fields[key] = value
+    with pytest.raises(OMMError) as e:
+        Orbit.from_omm(fields)
+    assert e.value.field == key and key in str(e.value) and words in str(e.value)
+    assert isinstance(e.value, OrbitProblemError)
+
+
+def test_unphysical_tle_values_name_the_field() -> None:
+    line1, line2 = SWARM_A.strip().splitlines()[-2:]
+
+    def with_checksum(line: str) -> str:
+        return line[:68] + str(tle_checksum(line))
+
+    bad_inclination = with_checksum(line2[:8] + "187.3500" + line2[16:])
+    with pytest.raises(TLEError, match="INCLINATION") as e:
+        Orbit.from_tle(f"{line1}\n{bad_inclination}")
+    assert e.value.field == "INCLINATION"
+    bad_motion = with_checksum(line2[:52] + "-5.27620058" + line2[63:])
+    with pytest.raises(TLEError, match="MEAN_MOTION"):
+        Orbit.from_tle(f"{line1}\n{bad_motion}")
+
+
+def test_decayed_elements_are_refused_naming_the_field() -> None:
+    fields = _swarm_a_omm()
+    fields["MEAN_MOTION"] = "18.5"  # a semi-major axis below the Earth's radius
+    with pytest.raises(OMMError, match="SGP4 initialisation") as e:
+        Orbit.from_omm(fields)
+    assert e.value.field in {"ECCENTRICITY", "MEAN_MOTION", "EPOCH"}

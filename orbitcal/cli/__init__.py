@@ -1,8 +1,15 @@
 """The ``orbitcal`` command: one module per sub-command, each exposing ``register(subparsers)``.
 
 A sub-command module defines ``register(sub: argparse._SubParsersAction) -> None`` which adds
-its parser and sets ``func=<callable(args) -> int>`` as default. Bad input exits non-zero with a
-one-line reason on stderr (CONTRACT section 2).
+its parser and sets ``func=<callable(args) -> int>`` as default. The library's commands are the
+modules of :data:`COMMAND_MODULES`; other installed packages add theirs through the entry-point
+group ``orbitcal.commands`` (the service's ``serve``, ``worker`` and ``demo``: the library never
+imports the service). ``register`` functions import nothing heavy, so ``orbitcal --help`` and
+``orbitcal X --help`` answer at once; each command imports what it needs when it runs.
+
+Errors: bad input exits non-zero with a one-line reason on stderr (CONTRACT section 2); the exit
+status comes from :attr:`orbitcal.errors.OrbitcalError.exit_code`, mapped in one place
+(:func:`exit_code_for`). Warnings print as one line each (:func:`_one_line_warning`).
 """
 
 from __future__ import annotations
@@ -10,9 +17,22 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
-from collections.abc import Sequence
+import warnings
+from collections.abc import Callable, Sequence
+from importlib.metadata import entry_points
+from typing import Any
 
 from orbitcal import __version__
+from orbitcal.errors import BadInputError, OrbitcalError
+
+__all__ = [
+    "COMMAND_MODULES",
+    "ENTRY_POINT_GROUP",
+    "CliError",
+    "build_parser",
+    "exit_code_for",
+    "main",
+]
 
 # Module names under orbitcal.cli, in help order.
 COMMAND_MODULES: tuple[str, ...] = (
@@ -23,17 +43,32 @@ COMMAND_MODULES: tuple[str, ...] = (
     "reproduce",
     "diagnose",
     "bench",
-    "serve",
-    "worker",
-    "demo",
+    "data",
 )
 
+#: Entry-point group through which other packages add sub-commands (``name = "module:register"``).
+ENTRY_POINT_GROUP = "orbitcal.commands"
 
-class CliError(Exception):
-    """Bad input or a failed precondition: printed as one line on stderr, exit status 2."""
+
+class CliError(BadInputError):
+    """Bad input or a failed precondition of a command: one line on stderr, exit status 2."""
+
+
+def _plugin_commands() -> list[tuple[str, Callable[[Any], None]]]:
+    """``(name, register)`` of the installed ``orbitcal.commands`` entry points, in name order."""
+    found = []
+    for ep in sorted(entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
+        if ep.name in COMMAND_MODULES:
+            continue  # the library's own commands cannot be replaced
+        found.append((ep.name, ep.load()))
+    # The service's commands in the order a newcomer meets them.
+    order = {"serve": 0, "worker": 1, "demo": 2}
+    found.sort(key=lambda item: (order.get(item[0], len(order)), item[0]))
+    return found
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The full ``orbitcal`` parser: the library's commands, then the installed plugins'."""
     parser = argparse.ArgumentParser(
         prog="orbitcal",
         description="On-orbit magnetometer calibration and sim-to-real gap diagnosis.",
@@ -41,29 +76,69 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"orbitcal {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMAND_MODULES:
-        try:
-            module = importlib.import_module(f"orbitcal.cli.{name}")
-        except ModuleNotFoundError as exc:
-            # Only while a command is being written; tests/test_cli_surface.py requires every one.
-            if exc.name != f"orbitcal.cli.{name}":
-                raise
-            continue
-        module.register(sub)
+        importlib.import_module(f"orbitcal.cli.{name}").register(sub)
+    for _, register in _plugin_commands():
+        register(sub)
     return parser
+
+
+def exit_code_for(exc: BaseException) -> int | None:
+    """The exit status for an error a command raised, or None when it is a bug (re-raised).
+
+    The one place where errors become exit codes: an :class:`~orbitcal.errors.OrbitcalError`
+    carries its own ``exit_code`` (bad input, orbit problems and model ranges 2, not enough
+    data 3, stale auxiliary tables 4, conflicts 5); an unreadable file (``OSError``) is bad
+    input, 2; so are the ``ValueError``s of code written before the error tree.
+    """
+    if isinstance(exc, OrbitcalError):
+        return int(exc.exit_code)
+    if isinstance(exc, OSError | ValueError | KeyError):
+        return BadInputError.exit_code
+    return None
+
+
+def _describe(exc: BaseException) -> str:
+    if isinstance(exc, OSError) and exc.filename is not None and exc.strerror:
+        return f"cannot read {exc.filename}: {exc.strerror}"
+    text = str(exc) if not isinstance(exc, KeyError) else str(exc.args[0] if exc.args else exc)
+    return " ".join(text.split())  # one line
+
+
+def _one_line_warning(command: str) -> Callable[..., str]:
+    """A ``warnings.formatwarning`` giving ``orbitcal CMD: warning: <message>`` on one line.
+
+    Only the text printed on stderr changes: warnings recorded by callers (``pytest.warns``,
+    ``catch_warnings(record=True)``) are untouched.
+    """
+
+    def format_warning(
+        message: Warning | str,
+        category: type[Warning],
+        filename: str,
+        lineno: int,
+        line: str | None = None,
+    ) -> str:
+        text = " ".join(str(message).split())
+        return f"orbitcal {command}: warning: {text}\n"
+
+    return format_warning
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    previous = warnings.formatwarning
+    warnings.formatwarning = _one_line_warning(args.command)
     try:
         return int(args.func(args) or 0)
-    except CliError as exc:
-        print(f"orbitcal {args.command}: {exc}", file=sys.stderr)
-        return 2
-    except (ValueError, OSError, KeyError) as exc:
-        # Library errors are typed ValueError/OSError subclasses carrying a full sentence.
-        print(f"orbitcal {args.command}: {exc}", file=sys.stderr)
-        return 2
+    except Exception as exc:
+        code = exit_code_for(exc)
+        if code is None:
+            raise
+        print(f"orbitcal {args.command}: {_describe(exc)}", file=sys.stderr)
+        return code
+    finally:
+        warnings.formatwarning = previous
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -45,4 +45,13 @@ def run(args: argparse.Namespace) -> int:
     tel = load_table(args, "apply")
     b_cal = apply_document(doc, tel)
     write_field_csv(args.out, tel.t_utc_s, b_cal)
+    import numpy as np
+
+    raw_norm = np.linalg.norm(tel.b_raw_nt, axis=1)
+    cal_norm = np.linalg.norm(b_cal, axis=1)
+    print(
+        f"apply: {doc.get('method', '?')} version {doc.get('version', '?')} on {len(tel)} samples; "
+        f"mean |B| {np.nanmean(raw_norm):.0f} nT raw -> {np.nanmean(cal_norm):.0f} nT calibrated; "
+        f"wrote {args.out}"
+    )
     return 0

@@ -38,6 +38,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="TLE file to draw satellites from (default: the shipped real Swarm/ISS sets)",
     )
     d.add_argument("--orbits", type=float, default=4.0, help="world length in orbits (default 4)")
+    d.add_argument(
+        "--compound",
+        action="store_true",
+        help="worlds of two and three effects at once: recall, spurious effects, verdict hits",
+    )
     d.set_defaults(func=run_diagnose)
 
 
@@ -60,6 +65,8 @@ def run_diagnose(args: argparse.Namespace) -> int:
             raise CliError(f"cannot read TLE file {args.tle}: {exc.strerror}") from None
     else:
         tle_text = real_tles_text()
+    if getattr(args, "compound", False):
+        return _run_compound(args, tle_text)
     console = Console(stderr=True)
     correct = 0
     t0 = time.perf_counter()
@@ -111,5 +118,36 @@ def run_diagnose(args: argparse.Namespace) -> int:
             json.dumps(result["confusion"], indent=1) + "\n"
         )
         confusion_png(result["confusion"], out / "diagnose_confusion.png")
+        print(f"results written to {out}")
+    return 0
+
+
+def _run_compound(args: argparse.Namespace, tle_text: str) -> int:
+    """``bench diagnose --compound``: worlds of two and three effects (issue 14)."""
+    from orbitcal.diagnose.bench import run_compound_benchmark
+
+    t0 = time.perf_counter()
+    result = run_compound_benchmark(
+        args.cases, seed=args.seed, tle_text=tle_text, n_orbits=args.orbits
+    )
+    wall = time.perf_counter() - t0
+    result["machine"] = {
+        "platform": platform.platform(),
+        "python": platform.python_version(),
+        "cpu_count": __import__("os").cpu_count(),
+        "wall_seconds": wall,
+    }
+    s = result["summary"]
+    print(
+        f"compound worlds {s['worlds']} ({s['worlds_2']} of 2, {s['worlds_3']} of 3 effects): "
+        f"recall {s['recall']:.1%} of {s['injected_observable']} observable injected effects, "
+        f"worlds with a spurious effect {s['worlds_with_spurious']:.1%} "
+        f"({s['spurious_per_world']:.3f} per world), verdict among the injected "
+        f"{s['verdict_among_injected']:.1%}, {wall:.0f} s"
+    )
+    if args.out:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "diagnose_compound_results.json").write_text(json.dumps(result, indent=1) + "\n")
         print(f"results written to {out}")
     return 0

@@ -16,6 +16,7 @@ __all__ = ["register", "run"]
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add the ``simulate`` sub-command."""
+    from orbitcal.cli._inputs import add_orbit_arguments
     from orbitcal.simulate.effects import EFFECT_NAMES
 
     p = sub.add_parser(
@@ -26,10 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
             "model and injected effects; write the telemetry, the TLE and the ground truth."
         ),
     )
-    p.add_argument("--tle", required=True, metavar="TLE", help="TLE file (one or many sets)")
-    p.add_argument(
-        "--norad", type=int, metavar="ID", help="NORAD id when the file holds several spacecraft"
-    )
+    add_orbit_arguments(p, required=True)
     p.add_argument("--start", required=True, metavar="ISO", help="first sample, ISO-8601 UTC (Z)")
     p.add_argument("--duration-s", required=True, type=float, metavar="S", help="span [s]")
     p.add_argument("--cadence-s", required=True, type=float, metavar="S", help="sampling [s]")
@@ -84,20 +82,25 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from orbitcal.cli import CliError
+    from orbitcal.cli._inputs import read_orbit_file
     from orbitcal.sensor import SensorModel
     from orbitcal.simulate import attitude_profile, parse_effect_spec, simulate_world
     from orbitcal.timescales import iso_to_utc_s
 
-    try:
-        tle_text = Path(args.tle).read_text()
-    except OSError as exc:
-        raise CliError(f"cannot read TLE file {args.tle}: {exc.strerror or exc}") from None
     try:
         start_utc_s = float(iso_to_utc_s(args.start)[0])
     except ValueError as exc:
         raise CliError(f"--start {args.start!r}: {exc}") from None
     if args.duration_s <= 0 or args.cadence_s <= 0:
         raise CliError("--duration-s and --cadence-s must be positive")
+    # The set in effect at the start (the latest not after it), as an operator would have had.
+    orbit = read_orbit_file(
+        args.tle,
+        norad_id=args.norad,
+        span_utc_s=(start_utc_s, start_utc_s + args.duration_s),
+        allow_stale=args.allow_stale_elements,
+        prefer_past=True,
+    )
     if args.duration_s / args.cadence_s > 2e7:
         raise CliError("more than 2e7 samples requested: raise --cadence-s or lower --duration-s")
     if args.noise_std_nt < 0:
@@ -133,8 +136,7 @@ def run(args: argparse.Namespace) -> int:
         change_utc_s = start_utc_s + args.sensor_change_at_s
     try:
         world = simulate_world(
-            tle_text,
-            norad_id=args.norad,
+            orbit,
             start_utc_s=start_utc_s,
             duration_s=args.duration_s,
             cadence_s=args.cadence_s,

@@ -90,14 +90,14 @@ def run(args: argparse.Namespace) -> int:
     import uvicorn
     from pydantic import SecretStr
 
-    from orbitcal.calibrate.holdout import rms_nt
     from orbitcal.cli import CliError
     from orbitcal.data import real_tles_text
+    from orbitcal.metrics import rms_nt
+    from orbitcal.pipeline import apply_document
     from orbitcal.sensor import SensorModel
     from orbitcal.simulate import Tumbling, make_effect, select_tle, simulate_world
     from orbitcal.timescales import utc_s_to_iso
     from service.app import create_app
-    from service.science import apply_linear
     from service.settings import Settings
 
     if args.days <= 0.25:
@@ -230,7 +230,7 @@ def run(args: argparse.Namespace) -> int:
     truth = world.b_ref_body_nt[last_hours]
 
     def rms_on_recent(doc: dict[str, Any]) -> float:
-        return rms_nt(apply_linear(doc, tel.b_raw_nt[last_hours]) - truth)
+        return rms_nt(apply_document(doc, tel.select(last_hours)), truth)
 
     print()
     print("  version  status       data end              held-out RMS  true RMS, last 6 h  reason")
@@ -248,20 +248,33 @@ def run(args: argparse.Namespace) -> int:
         f"{sensor.noise_std_nt:g} nT)"
     )
     print()
-    print("Where to look:")
-    print(f"  dashboard   {url}/dashboard#key={admin_key}")
-    print(f"  API docs    {url}/docs   (OpenAPI {url}/openapi.json)")
-    print(f"  metrics     {url}/metrics (X-API-Key: {admin_key})")
-    print(f"  database    {db}")
-    print(f"  telemetry   {url}/v1/spacecraft/{sc}/calibrations")
-    if args.keep_serving:
-        print("Serving until Ctrl-C.")
-        try:
-            while thread.is_alive():
-                time.sleep(0.5)
-        except KeyboardInterrupt:
-            pass
+    if not args.keep_serving:
+        # The links would point at a service that is gone: say so instead.
+        server.should_exit = True
+        thread.join(timeout=30)
+        print(
+            f"The demo service has stopped; its database is kept in {db}. Run "
+            "`orbitcal demo --keep-serving` to keep the service running and open its dashboard."
+        )
+        sys.stdout.flush()
+        return 0 if final < 10.0 else 1
+    try:  # Ctrl-C from the first link on stops the service cleanly
+        print("Where to look (serving until Ctrl-C):")
+        print(f"  dashboard   {url}/dashboard#key={admin_key}")
+        print(f"  API docs    {url}/docs   (OpenAPI {url}/openapi.json)")
+        print(f"  metrics     {url}/metrics (X-API-Key: {admin_key})")
+        print(f"  database    {db}")
+        print(f"  telemetry   {url}/v1/spacecraft/{sc}/calibrations")
+        sys.stdout.flush()
+        while thread.is_alive():
+            time.sleep(0.5)
+    except KeyboardInterrupt:
+        pass
     server.should_exit = True
     thread.join(timeout=30)
+    if thread.is_alive():
+        print("orbitcal demo: the service did not stop within 30 s", file=sys.stderr)
+    else:
+        print("orbitcal demo: the service has stopped.")
     sys.stdout.flush()
     return 0 if final < 10.0 else 1

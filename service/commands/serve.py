@@ -17,7 +17,15 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p = sub.add_parser(
         "serve",
         help="run the HTTP service (ingest, retraining, calibrations)",
-        description="Run the orbitcal HTTP service with uvicorn (one process; scheduler inside).",
+        description=(
+            "Run the orbitcal HTTP service with uvicorn (one process by default, --workers N for "
+            "more; the scheduler runs in one of them). Settings "
+            "not given as options come from ORBITCAL_* environment variables (docs/service.md). "
+            "ORBITCAL_ADMIN_KEY sets the admin API key: send it as the X-API-Key header to create "
+            "the other keys (POST /v1/keys); without it no key can be created (unless --no-auth)."
+        ),
+        epilog="environment: ORBITCAL_ADMIN_KEY (admin API key), ORBITCAL_DATABASE_URL, "
+        "ORBITCAL_BROKER_URL, ORBITCAL_JOB_BACKEND, ... (docs/service.md)",
     )
     p.add_argument("--host", default="127.0.0.1", help="bind address (default 127.0.0.1)")
     p.add_argument("--port", type=int, default=8000, help="port (default 8000)")
@@ -42,6 +50,15 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         choices=("inline", "celery"),
         help="run retraining jobs in this process (inline) or on Celery workers",
     )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        metavar="N",
+        help="API processes (default 1, or ORBITCAL_WORKERS); with N > 1 the rate limiter needs "
+        "ORBITCAL_RATE_LIMIT_REDIS_URL (shared buckets) or ORBITCAL_RATE_LIMIT_PER_S=0, and one "
+        "process per database runs the scheduler",
+    )
     p.set_defaults(func=run)
 
 
@@ -57,6 +74,8 @@ def settings_from_args(args: argparse.Namespace) -> Any:
         overrides["scheduler"] = False
     if args.job_backend:
         overrides["job_backend"] = args.job_backend
+    if getattr(args, "workers", None):
+        overrides["workers"] = args.workers
     return Settings(**overrides)
 
 
@@ -87,5 +106,32 @@ def run(args: argparse.Namespace) -> int:
         f"{redact_url(settings.database_url)}  dashboard /dashboard  API /docs",
         file=sys.stderr,
     )
+    if settings.workers > 1:
+        # Each worker process builds its own app from the environment: hand the options on.
+        import os
+
+        os.environ.update(
+            {
+                "ORBITCAL_BIND_HOST": settings.bind_host,
+                "ORBITCAL_DATABASE_URL": settings.database_url,
+                "ORBITCAL_AUTH": str(settings.auth).lower(),
+                "ORBITCAL_SCHEDULER": str(settings.scheduler).lower(),
+                "ORBITCAL_JOB_BACKEND": settings.job_backend,
+                "ORBITCAL_WORKERS": str(settings.workers),
+            }
+        )
+        uvicorn.run(
+            "service.app:app_from_environment",
+            factory=True,
+            workers=settings.workers,
+            host=args.host,
+            port=args.port,
+            log_level="warning",
+            access_log=False,
+            # uvicorn kills a worker that does not answer its health ping within this time; a
+            # retraining or diagnosis holding the GIL on a busy machine must not cost the worker
+            timeout_worker_healthcheck=120,
+        )
+        return 0
     uvicorn.run(app, host=args.host, port=args.port, log_level="warning", access_log=False)
     return 0

@@ -1,0 +1,275 @@
+"""The notebook surface of orbitcal: six functions re-exported by ``import orbitcal``.
+
+======================  =================================================================
+``read_table``           a telemetry table from a file (CSV, Parquet, NDJSON, JSON) or a DataFrame
+``load_orbit``           an :class:`~orbitcal.orbit.Orbit` from a TLE or OMM file, text or dict
+``reference_field``      the reference field along the orbit, NEC / ITRS / body frame [nT]
+``calibrate_table``      fit a calibration on the earlier samples, score it on the later ones
+``apply_calibration``    the calibrated field of a table through a calibration document
+``diagnose_table``       which unmodelled effect explains what the calibration leaves
+======================  =================================================================
+
+Each wraps the library's own pipeline (the same code as the ``orbitcal`` commands), with
+keyword-only options and seeds passed in. Heavy packages (torch, scipy, pandas) are imported when a
+function runs, so ``import orbitcal`` stays light. The tutorial ``docs/tutorial.md`` walks through
+them; ``tests/test_tutorial.py`` runs it.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from collections.abc import Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    import numpy.typing as npt
+    import pandas as pd
+
+    from orbitcal.orbit import Orbit
+    from orbitcal.pipeline import CalibrationRun
+    from orbitcal.telemetry import Telemetry
+    from orbitcal.truth import Truth
+
+__all__ = [
+    "apply_calibration",
+    "calibrate_table",
+    "diagnose_table",
+    "load_orbit",
+    "read_table",
+    "reference_field",
+]
+
+
+def read_table(source: str | Path | pd.DataFrame, *, time_scale: str = "UTC") -> Telemetry:
+    """A validated telemetry table (CONTRACT section 1) from a file or a pandas DataFrame.
+
+    Parameters
+    ----------
+    source : str, Path or pandas.DataFrame
+        A ``.csv``, ``.parquet``, ``.ndjson`` or ``.json`` file, or a DataFrame with the contract's
+        columns (``time``, ``b_x, b_y, b_z`` [nT], optional ``q_w…q_z``, ``r_x…r_z`` [km], …).
+    time_scale : {"UTC", "TAI", "GPS"}, keyword-only
+        The scale of the table's times.
+
+    Returns
+    -------
+    Telemetry
+        The valid rows. Rejected rows are reported in one :class:`UserWarning` (count and the
+        first row's reason).
+
+    Raises
+    ------
+    orbitcal.telemetry.TelemetryError
+        The table cannot be read, or no row is valid.
+    """
+    from orbitcal.telemetry import TelemetryError, from_frame, read_telemetry
+
+    if isinstance(source, str | Path):
+        result = read_telemetry(source, time_scale=time_scale)
+    else:
+        result = from_frame(source, time_scale=time_scale)
+    if result.rejected:
+        first = result.rejected[0]
+        warnings.warn(
+            f"{len(result.rejected)} rows rejected (first: row {first.row}: {first.reason}); "
+            f"the {len(result.telemetry)} valid rows are used",
+            UserWarning,
+            stacklevel=2,
+        )
+    if len(result.telemetry) == 0:
+        raise TelemetryError("no valid rows in the table")
+    return result.telemetry
+
+
+def load_orbit(
+    source: str | Path | Mapping[str, Any],
+    *,
+    norad_id: int | None = None,
+    near_utc_s: float | tuple[float, float] | None = None,
+) -> Orbit:
+    """One spacecraft's SGP4 elements from a TLE or OMM file, TLE/OMM text, or an OMM dict.
+
+    Parameters
+    ----------
+    source : str, Path or mapping
+        A path to a TLE file (one or many sets) or an OMM file (XML, JSON, CSV); the text of one;
+        or one OMM record as a dict (CelesTrak JSON keys).
+    norad_id : int, keyword-only
+        The spacecraft, when the source holds several.
+    near_utc_s : float or (float, float), keyword-only
+        The data's time or span, POSIX seconds of UTC [s]: of several sets the one nearest in
+        epoch is taken (default: the latest).
+
+    Returns
+    -------
+    Orbit
+
+    Raises
+    ------
+    orbitcal.orbit.OrbitError
+        Malformed or unphysical elements (naming the field), or an ambiguous spacecraft.
+    """
+    from orbitcal.orbit import Orbit, read_orbits, select_orbit
+
+    if isinstance(source, Mapping):
+        return Orbit.from_omm(source)
+    text = str(source)
+    path = Path(text)
+    if isinstance(source, Path) or ("\n" not in text and path.is_file()):
+        text = path.read_text()
+    orbits = read_orbits(text, path=str(source)[:80])
+    return select_orbit(orbits, norad_id=norad_id, at_utc_s=near_utc_s)
+
+
+def reference_field(
+    telemetry: Telemetry,
+    *,
+    orbit: Orbit | None = None,
+    field: str = "IGRF-14",
+    attitude_frame: str = "GCRS",
+) -> Truth:
+    """The reference field at every sample, each at its own time and position.
+
+    Parameters
+    ----------
+    telemetry : Telemetry
+    orbit : Orbit, keyword-only
+        Needed when the table has no positions (``r_x, r_y, r_z``).
+    field : str, keyword-only
+        Model name(s) joined by ``+`` (default IGRF-14; e.g. ``"CHAOS-8.1+LCS-1+RC"``).
+    attitude_frame : {"GCRS", "ITRS"}, keyword-only
+        Frame of the table's quaternions.
+
+    Returns
+    -------
+    orbitcal.truth.Truth
+        ``b_nec_nt``, ``b_itrs_nt`` and (with attitude) ``b_body_nt`` [nT], shape (N, 3).
+    """
+    from orbitcal.truth import truth_for_telemetry
+
+    return truth_for_telemetry(telemetry, orbit=orbit, attitude_frame=attitude_frame, field=field)
+
+
+def calibrate_table(
+    telemetry: Telemetry,
+    *,
+    orbit: Orbit | None = None,
+    method: str = "lmbp-hk",
+    field: str = "IGRF-14",
+    attitude_frame: str = "GCRS",
+    holdout_fraction: float = 0.25,
+    seed: int = 0,
+    **options: Any,
+) -> CalibrationRun:
+    """Fit a calibration on the earlier samples and score it on the later ones.
+
+    Parameters
+    ----------
+    telemetry : Telemetry
+    orbit : Orbit, keyword-only
+        Needed when the table has no positions.
+    method : str, keyword-only
+        ``linear``, ``linear-hk``, ``lmbp``, ``lmbp-hk`` (default), ``twostep``, ``flann``,
+        ``online`` (:data:`orbitcal.calibrate.METHODS`).
+    field, attitude_frame : str, keyword-only
+        As in :func:`reference_field`.
+    holdout_fraction : float, keyword-only
+        Share of the latest samples held out for the metrics (default 0.25).
+    seed : int, keyword-only
+        Seeds the fit's random start.
+    **options
+        Passed to the calibrator (``n_hidden``, ``restarts``, ``max_epochs``).
+
+    Returns
+    -------
+    orbitcal.pipeline.CalibrationRun
+        ``.document`` is the CONTRACT section-4 document (``document["metrics"]``), ``.calibration``
+        the fitted object, ``.holdout_scores`` the held-out RMS values.
+    """
+    import numpy as np
+
+    from orbitcal.pipeline import calibrate
+
+    return calibrate(
+        telemetry,
+        orbit=orbit,
+        method=method,
+        field=field,
+        attitude_frame=attitude_frame,
+        holdout_fraction=holdout_fraction,
+        rng=np.random.default_rng(seed),
+        **options,
+    )
+
+
+def apply_calibration(
+    calibration: Mapping[str, Any] | str | Path | CalibrationRun, telemetry: Telemetry
+) -> npt.NDArray[Any]:
+    """The calibrated field of every row [nT, body frame], shape (N, 3).
+
+    Parameters
+    ----------
+    calibration : dict, path or CalibrationRun
+        A section-4 document (dict or JSON file) or the result of :func:`calibrate_table`.
+    telemetry : Telemetry
+        Housekeeping columns the calibration uses must be present.
+    """
+    from orbitcal.pipeline import CalibrationRun, apply_document
+
+    if isinstance(calibration, CalibrationRun):
+        document: dict[str, Any] = calibration.document
+    elif isinstance(calibration, str | Path):
+        document = json.loads(Path(calibration).read_text())
+    else:
+        document = dict(calibration)
+    return apply_document(document, telemetry)
+
+
+def diagnose_table(
+    telemetry: Telemetry,
+    *,
+    orbit: Orbit | None = None,
+    field: str = "IGRF-14",
+    attitude_frame: str = "GCRS",
+    calibration: Mapping[str, Any] | None = None,
+    seed: int = 0,
+) -> dict[str, Any]:
+    """Which unmodelled effect explains the calibrated residual (CONTRACT section-5 report).
+
+    Parameters
+    ----------
+    telemetry : Telemetry
+        With attitude quaternions.
+    orbit, field, attitude_frame : keyword-only
+        As in :func:`reference_field`.
+    calibration : dict, keyword-only
+        The calibration in service (a section-4 document) as a prior on the 12 parameters.
+    seed : int, keyword-only
+        Seeds the learned model.
+
+    Returns
+    -------
+    dict
+        ``verdict``, ranked ``effects`` with their held-out shrink, ``baseline`` and ``final``.
+    """
+    import numpy as np
+    from threadpoolctl import threadpool_limits
+
+    from orbitcal.diagnose.api import diagnose
+
+    prior = None
+    if calibration is not None:
+        from orbitcal.diagnose.prior import prior_from_document
+
+        prior = prior_from_document(dict(calibration))
+    with threadpool_limits(1):
+        return diagnose(
+            telemetry,
+            orbit=orbit,
+            field=field,
+            attitude_frame=attitude_frame,
+            rng=np.random.default_rng(seed),
+            calibration_prior=prior,
+        )

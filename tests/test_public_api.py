@@ -1,0 +1,162 @@
+"""Each package's public surface (``__all__``) is pinned: a change to it is a decision, made here.
+
+Every name of each ``__all__`` must resolve (lazy re-exports included), the notebook surface of
+``import orbitcal`` is the documented one (``docs/tutorial.md``), and importing ``orbitcal`` stays
+light (``tests/test_cli_surface.py`` checks which packages it loads).
+"""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+
+import pytest
+
+import orbitcal
+
+#: package -> its __all__, sorted.
+PUBLIC: dict[str, list[str]] = {
+    "orbitcal": [
+        "Orbit",
+        "OrbitcalError",
+        "Telemetry",
+        "__version__",
+        "apply_calibration",
+        "calibrate_table",
+        "diagnose_table",
+        "load_orbit",
+        "read_table",
+        "reference_field",
+    ],
+    "orbitcal.auxdata": [
+        "ActiveTable",
+        "DEFAULT_URLS",
+        "KINDS",
+        "ParsedTable",
+        "StormMask",
+        "TableFormatError",
+        "active_table",
+        "data_dir",
+        "generation",
+        "quiet_selection",
+        "reference_field_provenance",
+        "reload",
+        "shipped_table",
+        "status",
+        "storm_mask",
+        "table_status",
+        "tables_provenance",
+        "update",
+        "using",
+    ],
+    "orbitcal.calibrate": [
+        "AffineCalibration",
+        "Calibration",
+        "CalibrationError",
+        "DEFAULT_METHOD",
+        "DocumentError",
+        "FitData",
+        "LMBPCalibration",
+        "METHODS",
+        "MethodSpec",
+        "MissingAttitudeError",
+        "PoorCoverageError",
+        "TooFewSamplesError",
+        "UnknownMethodError",
+        "calibration_class",
+        "fit_method",
+    ],
+    "orbitcal.cli": [
+        "COMMAND_MODULES",
+        "CliError",
+        "ENTRY_POINT_GROUP",
+        "build_parser",
+        "exit_code_for",
+        "main",
+    ],
+    "orbitcal.data": ["REAL_TLES_FILE", "real_tles_text"],
+    "orbitcal.diagnose": [
+        "Attribution",
+        "CATALOGUE",
+        "DiagnosisData",
+        "EFFECT_NAMES",
+        "Effect",
+        "EffectScore",
+        "SplitFit",
+        "attribute",
+        "build_report",
+        "diagnose",
+        "diagnose_data",
+        "diagnosis_data",
+        "report_html",
+    ],
+    "orbitcal.field": [
+        "CompositeField",
+        "DEFAULT_FIELD",
+        "FIELD_NAMES",
+        "FieldModel",
+        "FieldRangeError",
+        "MAIN_FIELD_NAMES",
+        "RingCurrentField",
+        "SphericalHarmonicModel",
+        "get_field",
+    ],
+    "orbitcal.reproduce": [],
+    "orbitcal.simulate": [
+        "ATTITUDE_PROFILES",
+        "AttitudeProfile",
+        "EFFECTS",
+        "EFFECT_NAMES",
+        "Effect",
+        "Housekeeping",
+        "Inertial",
+        "Injection",
+        "Kinematics",
+        "NadirLVLH",
+        "TleSet",
+        "Tumbling",
+        "Wang2020Scenario",
+        "World",
+        "WorldFiles",
+        "WorldState",
+        "attitude_profile",
+        "kinematics",
+        "make_effect",
+        "parse_effect_spec",
+        "parse_tles",
+        "read_world",
+        "select_tle",
+        "simulate_measured_field",
+        "simulate_world",
+        "wang2020_ground",
+        "wang2020_orbit",
+        "wang2020_time_s",
+        "wang2020_truth_nt",
+    ],
+}
+
+
+def test_every_package_is_pinned() -> None:
+    found = {"orbitcal"} | {
+        f"orbitcal.{m.name}" for m in pkgutil.iter_modules(orbitcal.__path__) if m.ispkg
+    }
+    assert found == set(PUBLIC)
+
+
+@pytest.mark.parametrize("package", sorted(PUBLIC))
+def test_all_is_pinned_and_resolves(package: str) -> None:
+    module = importlib.import_module(package)
+    assert sorted(module.__all__) == PUBLIC[package]
+    assert len(set(module.__all__)) == len(module.__all__)
+    for name in module.__all__:
+        assert getattr(module, name) is not None, f"{package}.{name}"
+
+
+def test_notebook_surface() -> None:
+    expected = {"read_table", "load_orbit", "reference_field", "calibrate_table"}
+    expected |= {"apply_calibration", "diagnose_table"}
+    assert expected <= set(orbitcal.__all__)
+    for name in expected:
+        assert callable(getattr(orbitcal, name)) and getattr(orbitcal, name).__doc__
+    with pytest.raises(AttributeError):
+        orbitcal.not_a_name  # noqa: B018
