@@ -29,6 +29,7 @@ from orbitcal.auxdata.formats import (
     write_leap_second_dat,
 )
 from orbitcal.cli import main as cli_main
+from orbitcal.provenance import result_provenance
 
 FIXTURES = Path(__file__).resolve().parent / "fixtures" / "auxdata"
 SHIPPED_LEAP = (
@@ -323,7 +324,7 @@ def test_rc_index_update_from_the_directory_page_extends_the_external_field(
 
 def test_provenance_past_the_shipped_tables_says_so(data_dir: Path) -> None:
     nov = [_ts(2026, 11, 12), _ts(2026, 11, 13)]
-    prov = auxdata.tables_provenance(nov, reference_field="IGRF-14")
+    prov = result_provenance(nov, reference_field="IGRF-14")
     tables = prov["tables"]
     assert tables["rc_index"]["status"] == "past_end"
     assert tables["rc_index"]["coverage_end"].startswith("2026-05-08")

@@ -31,21 +31,14 @@ def test_the_library_never_imports_the_service() -> None:
     assert graph.forbidden_edges(edges) == []
 
 
-#: Package-level cycles still open, each with its reason; the test fails when one disappears (remove
-#: it here) or a new one appears. auxdata.provenance asks orbitcal.field for a model's validity
-#: (reference_field_provenance) while field.external reads the RC index from auxdata.tables: no
-#: module-level cycle, but the two packages depend on each other (issue 13, left to auxdata).
-KNOWN_PACKAGE_CYCLES = [["orbitcal.auxdata", "orbitcal.field"]]
-
-
 def test_no_import_cycles_between_modules() -> None:
     graph = _tool()
     assert graph.cycles(graph.import_edges(REPO)) == []
 
 
-def test_no_new_import_cycles_between_packages() -> None:
+def test_no_import_cycles_between_packages() -> None:
     graph = _tool()
-    assert graph.cycles(graph.package_graph(graph.import_edges(REPO))) == KNOWN_PACKAGE_CYCLES
+    assert graph.cycles(graph.package_graph(graph.import_edges(REPO))) == []
 
 
 def test_the_cycle_finder_finds_a_cycle() -> None:

@@ -39,7 +39,6 @@ PUBLIC: dict[str, list[str]] = {
         "data_dir",
         "generation",
         "quiet_selection",
-        "reference_field_provenance",
         "reload",
         "shipped_table",
         "status",
@@ -100,6 +99,7 @@ PUBLIC: dict[str, list[str]] = {
         "RingCurrentField",
         "SphericalHarmonicModel",
         "get_field",
+        "reference_field_provenance",
     ],
     "orbitcal.reproduce": [],
     "orbitcal.simulate": [

@@ -7,19 +7,16 @@ the RC index (DTU, as ChaosMagPy reads it) and Kp/Dst (GFZ, WDC Kyoto) for quiet
   update``); :func:`status` says what is installed and until when (``orbitcal data status``).
 * :func:`active_table` serves the installed copy, or the shipped one (see
   ``orbitcal/auxdata/shipped/README.md``) when that is valid longer.
-* :func:`tables_provenance` is the block every result carries: which file, valid until when,
-  retrieved when, and whether the data run past it.
+* :func:`tables_provenance` is the tables' part of the block every result carries
+  (:func:`orbitcal.provenance.result_provenance`): which file, valid until when, retrieved when,
+  and whether the data run past it.
 * :func:`storm_mask` flags storm-time samples for retraining.
 """
 
 from __future__ import annotations
 
 from orbitcal.auxdata.formats import ParsedTable, TableFormatError
-from orbitcal.auxdata.provenance import (
-    reference_field_provenance,
-    table_status,
-    tables_provenance,
-)
+from orbitcal.auxdata.provenance import table_status, tables_provenance
 from orbitcal.auxdata.quiet import StormMask, quiet_selection, storm_mask
 from orbitcal.auxdata.tables import (
     DEFAULT_URLS,
@@ -46,7 +43,6 @@ __all__ = [
     "data_dir",
     "generation",
     "quiet_selection",
-    "reference_field_provenance",
     "reload",
     "shipped_table",
     "status",

@@ -1,8 +1,12 @@
-"""Which tables a result used, until when they hold, and whether the data lie past their end."""
+"""Which tables a result used, until when they hold, and whether the data lie past their end.
+
+The reference field model's own validity is :func:`orbitcal.field.reference_field_provenance`;
+:func:`orbitcal.provenance.result_provenance` joins the two (auxdata sits below the field models:
+``orbitcal.field`` reads the RC index from here, never the reverse).
+"""
 
 from __future__ import annotations
 
-import re
 from datetime import UTC, datetime
 from typing import Any
 
@@ -11,10 +15,7 @@ import numpy.typing as npt
 
 from orbitcal.auxdata.tables import active_table
 
-__all__ = ["reference_field_provenance", "table_status", "tables_provenance"]
-
-_DAY_S = 86_400.0
-_MJD2000_UNIX_S = 946_684_800.0
+__all__ = ["table_status", "tables_provenance"]
 
 
 def _iso(t: float | None) -> str | None:
@@ -53,32 +54,9 @@ def table_status(kind: str, t_start_utc_s: float, t_end_utc_s: float) -> dict[st
     return out
 
 
-def reference_field_provenance(name: str) -> dict[str, Any]:
-    """The reference field model(s): name, model family, generation, validity end."""
-    models = []
-    for term in (t.strip() for t in str(name).split("+")):
-        m = re.fullmatch(r"([A-Za-z]+)-(\d+(?:\.\d+)?)(-static)?", term)
-        entry: dict[str, Any] = {
-            "name": term,
-            "model": m.group(1) if m else term,
-            "generation": m.group(2) if m else None,
-        }
-        try:
-            from orbitcal.field import get_field
-
-            valid = getattr(get_field(term), "valid_mjd2000", None)
-            if valid is not None:
-                entry["valid_until"] = _iso(float(valid[1]) * _DAY_S + _MJD2000_UNIX_S)
-        except ValueError:
-            entry["valid_until"] = None
-        models.append(entry)
-    return {"name": str(name), "models": models}
-
-
 def tables_provenance(
     t_utc_s: npt.ArrayLike,
     *,
-    reference_field: str | None = None,
     kinds: tuple[str, ...] = ("leap_seconds", "eop", "rc_index"),
     rc_index_used: bool | None = None,
     external_field_variant: str | None = None,
@@ -135,6 +113,4 @@ def tables_provenance(
         "tables": tables,
         "warnings": warnings,
     }
-    if reference_field is not None:
-        out["reference_field"] = reference_field_provenance(reference_field)
     return out

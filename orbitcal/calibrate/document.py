@@ -63,7 +63,7 @@ def calibration_to_document(
     """Build the section-4 document for a fitted calibration.
 
     ``metrics`` must contain ``holdout_rms_nt`` [nT]; ``created_at`` defaults to now (UTC).
-    ``provenance`` (default: computed by :func:`orbitcal.auxdata.tables_provenance` over the data
+    ``provenance`` (default: computed by :func:`orbitcal.provenance.result_provenance` over the data
     span) names the leap-second, EOP and RC tables behind the reference field and the reference
     model's generation, and warns when the data run past a table's end; it is an extra key beside
     those of CONTRACT section 4.
@@ -72,9 +72,9 @@ def calibration_to_document(
         raise ValueError("metrics must contain holdout_rms_nt")
     M, o = cal.linear()
     if provenance is None:
-        from orbitcal.auxdata import tables_provenance
+        from orbitcal.provenance import result_provenance
 
-        provenance = tables_provenance(
+        provenance = result_provenance(
             [float(t_start_utc_s), float(t_end_utc_s)],
             reference_field=reference_field,
             kinds=("leap_seconds", "eop", "rc_index")

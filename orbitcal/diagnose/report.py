@@ -224,14 +224,14 @@ def build_report(
 
 def _provenance(data: DiagnosisData, att: Attribution) -> dict[str, Any]:
     """The tables behind the report (orbitcal.auxdata) and which external-field variant ran."""
-    from orbitcal.auxdata import tables_provenance
+    from orbitcal.provenance import result_provenance
 
     variant = next(
         (str(e.params.get("variant")) for e in att.effects if e.name == "external_field"), None
     )
     if variant is not None and data.b_ext_body_nt is None and data.rc_index_nt is None:
         variant += " (estimated from the data; no RC index for these dates)"
-    return tables_provenance(
+    return result_provenance(
         data.t_utc_s,
         reference_field=data.reference_field,
         rc_index_used=data.rc_index_nt is not None,

@@ -17,12 +17,20 @@ North, East, Centre (down) components [nT]; dates outside a model's validity rai
 
 from __future__ import annotations
 
+import re
+from datetime import UTC, datetime
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from orbitcal.field._base import FieldModel, FieldRangeError, SphericalHarmonicModel
+from orbitcal.field._base import (
+    FieldModel,
+    FieldRangeError,
+    SphericalHarmonicModel,
+    mjd2000_to_utc_s,
+)
 from orbitcal.field.chaos import chaos_core
 from orbitcal.field.crust import CRUSTAL_MODELS, crustal_field
 from orbitcal.field.external import RingCurrentField, ring_current_field
@@ -38,6 +46,7 @@ __all__ = [
     "RingCurrentField",
     "SphericalHarmonicModel",
     "get_field",
+    "reference_field_provenance",
 ]
 
 #: The reference field when none is named (CONTRACT section 2).
@@ -126,3 +135,35 @@ def get_field(name: str = DEFAULT_FIELD) -> FieldModel:
     if len(terms) == 1:
         return _single(terms[0])
     return CompositeField(tuple(_single(t) for t in terms))
+
+
+def reference_field_provenance(name: str) -> dict[str, Any]:
+    """The reference field model(s) a result used: name, model family, generation, validity end.
+
+    Returns
+    -------
+    dict
+        ``{"name": name, "models": [{"name", "model", "generation", "valid_until"?}, ...]}``, one
+        entry per ``+`` term; ``valid_until`` (ISO UTC) for a model with a validity span, ``None``
+        for a term :func:`get_field` refuses. :func:`orbitcal.provenance.result_provenance` adds
+        it to the tables' block.
+    """
+    models = []
+    for term in (t.strip() for t in str(name).split("+")):
+        m = re.fullmatch(r"([A-Za-z]+)-(\d+(?:\.\d+)?)(-static)?", term)
+        entry: dict[str, Any] = {
+            "name": term,
+            "model": m.group(1) if m else term,
+            "generation": m.group(2) if m else None,
+        }
+        try:
+            valid = getattr(get_field(term), "valid_mjd2000", None)
+            if valid is not None:
+                t_end_utc_s = float(mjd2000_to_utc_s(np.asarray(float(valid[1]))))
+                entry["valid_until"] = datetime.fromtimestamp(t_end_utc_s, tz=UTC).strftime(
+                    "%Y-%m-%dT%H:%M:%SZ"
+                )
+        except ValueError:
+            entry["valid_until"] = None
+        models.append(entry)
+    return {"name": str(name), "models": models}
