@@ -32,6 +32,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy import stats
 
+from orbitcal.diagnose.blocked import BlockedDesign
 from orbitcal.diagnose.bounds import consistency_reasons, param_range
 from orbitcal.diagnose.effects import (
     CATALOGUE,
@@ -144,36 +145,6 @@ class JointFit:
         return np.asarray(pred)
 
 
-def _design(data: DiagnosisData, blocks: Sequence[DesignBlock]) -> tuple[FloatArray, FloatArray]:
-    """Stacked design matrix (3N, 12 + sum p) with unit-scaled columns, and the column scales."""
-    n = data.n
-    b = data.b_ref_body_nt / FIELD_SCALE_NT
-    p = 12 + sum(len(bl.names) for bl in blocks)
-    x = np.zeros((n, 3, p))
-    for i in range(3):
-        x[:, i, 3 * i : 3 * i + 3] = b
-        x[:, i, 9 + i] = 1.0
-    col = 12
-    for bl in blocks:
-        q = len(bl.names)
-        x[:, :, col : col + q] = bl.g
-        col += q
-    x2 = x.reshape(3 * n, p)
-    scale = np.sqrt(np.mean(x2**2, axis=0))
-    if p > 12:
-        # Effect columns are scaled by the part the calibration cannot absorb, so the ridge acts
-        # on what the data can tell apart (a time offset under a steady spin is mostly absorbed).
-        q_cal = data.calibration_q  # the columns x2[:, :12], factorised once per data set
-        eff = x2[:, 12:]
-        raw = scale[12:].copy()
-        scale[12:] = np.sqrt(np.mean((eff - q_cal @ (q_cal.T @ eff)) ** 2, axis=0))
-        # A column the calibration absorbs whole (the radial gradient of a pure dipole is -3B/r)
-        # keeps a floor, so that the normal equations stay invertible for the covariance.
-        scale[12:] = np.maximum(scale[12:], 1e-6 * raw)
-    scale[scale == 0.0] = 1.0
-    return x2 / scale, scale
-
-
 def fit_joint(
     data: DiagnosisData,
     fit_mask: BoolArray,
@@ -216,21 +187,23 @@ def fit_joint(
         normal equations of each reweighting step. False fits them freely (to tell whether a
         candidate only wins by leaving its range).
     """
-    x_all, scale = _design(data, blocks)
-    rows = np.repeat(fit_mask, 3)
-    x = x_all[rows]
-    y = data.b_raw_nt[fit_mask].reshape(-1)
+    design = BlockedDesign(data, blocks)
+    scale = design.scale
+    p = design.p
+    index = np.flatnonzero(fit_mask)
+    n_rows = 3 * index.size
+    y = data.b_raw_nt[index].reshape(-1)
     w = np.ones_like(y)
-    theta = np.zeros(x.shape[1])
+    theta = np.zeros(p)
     sigma = 1.0
-    normal = np.eye(x.shape[1])
+    normal = np.eye(p)
     # A light ridge on the effect columns (unit-scaled, 1e-5 of their mean square) keeps nearly
     # collinear regressors (e.g. a current bump sampled at only two local times) from exploding;
     # the 12 calibration columns are left free.
-    ridge = np.diag(np.r_[np.full(12, 1e-10), np.full(x.shape[1] - 12, ridge_effects)])
+    ridge = np.diag(np.r_[np.full(12, 1e-10), np.full(p - 12, ridge_effects)])
     prior = data.calibration_prior if use_prior else None
-    prior_precision = np.zeros(x.shape[1])
-    prior_mean = np.zeros(x.shape[1])
+    prior_precision = np.zeros(p)
+    prior_mean = np.zeros(p)
     if prior is not None:
         # Unit-scaled parameters: theta_s = theta * scale, theta = (A * FIELD_SCALE_NT, o, ...).
         sd = np.r_[np.full(9, prior.sigma_a * FIELD_SCALE_NT), np.full(3, prior.sigma_o_nt)]
@@ -240,11 +213,10 @@ def fit_joint(
         # that of the same model fitted without the prior when the rows allow it (else of the
         # prior calibration itself), fixed, so that a prior at odds with the data cannot inflate
         # its own weight through the residual.
-        if x.shape[0] > 2 * x.shape[1] + 30:
-            coef0 = np.linalg.lstsq(x, y, rcond=None)[0]
-            r0 = y - x @ coef0
+        if n_rows > 2 * p + 30:
+            r0 = design.residual(index, y, design.lstsq(index, y))
         else:
-            r0 = y - x[:, :12] @ prior_mean[:12]
+            r0 = design.residual(index, y, np.r_[prior_mean[:12], np.zeros(p - 12)])
         noise = max(float(1.4826 * np.median(np.abs(r0 - np.median(r0)))), 1e-6)
         prior_precision *= noise**2
     lo_s, hi_s = _scaled_bounds(blocks, scale) if bounded else (None, None)
@@ -253,23 +225,23 @@ def fit_joint(
         # weighted by the noise of a fit without them (fixed, as for the calibration prior).
         pm, pp = _effect_priors(blocks, scale)
         if np.any(pp > 0.0):
-            coef0 = np.linalg.lstsq(x, y, rcond=None)[0]
-            r0 = y - x @ coef0
+            r0 = design.residual(index, y, design.lstsq(index, y))
             noise = max(float(1.4826 * np.median(np.abs(r0 - np.median(r0)))), 1e-6)
             prior_mean = np.where(pp > 0.0, pm, prior_mean)
             prior_precision = prior_precision + pp * noise**2
     for it in range(iterations if robust else 1):
-        xw = x * w[:, None]
-        normal = x.T @ xw + ridge * x.shape[0] + np.diag(prior_precision)
-        rhs = xw.T @ y + prior_precision * prior_mean
+        # Normal equations accumulated a block of samples at a time (memory bounded by the
+        # block, not by the number of samples).
+        gram, rhs_data = design.normal_equations(index, y, w)
+        normal = gram + ridge * n_rows + np.diag(prior_precision)
+        rhs = rhs_data + prior_precision * prior_mean
         try:
             theta = np.linalg.solve(normal, rhs)
         except np.linalg.LinAlgError:  # pragma: no cover - singular design
-            sw = np.sqrt(w)
-            theta = np.asarray(np.linalg.lstsq(x * sw[:, None], y * sw, rcond=None)[0], float)
+            theta = design.lstsq(index, y, w)
         if lo_s is not None and hi_s is not None and (np.any(theta < lo_s) or np.any(theta > hi_s)):
             theta = _box_solve(normal, rhs, lo_s, hi_s, theta)
-        r = y - x @ theta
+        r = design.residual(index, y, theta)
         sigma = max(float(1.4826 * np.median(np.abs(r - np.median(r)))), 1e-6)
         if not robust or it == iterations - 1:
             break
@@ -403,11 +375,16 @@ def _resolve(
     """
     if not block.alternatives:
         return block
-    options = [block, *block.alternatives]
-    bic = [_train_bic(data, train, [*fixed, opt], bounded=bounded) for opt in options]
-    if not np.any(np.isfinite(bic)):
-        return block
-    return options[int(np.argmin(bic))]
+    # One alternative at a time: a lazily built one is dropped unless it is the best so far.
+    # The first lowest BIC wins (a NaN counts as lowest, as in numpy's argmin).
+    best, best_bic = block, _train_bic(data, train, [*fixed, block], bounded=bounded)
+    any_finite = bool(np.isfinite(best_bic))
+    for opt in block.alternatives:
+        bic = _train_bic(data, train, [*fixed, opt], bounded=bounded)
+        any_finite = any_finite or bool(np.isfinite(bic))
+        if bic < best_bic or (np.isnan(bic) and not np.isnan(best_bic)):
+            best, best_bic = opt, bic
+    return best if any_finite else block
 
 
 def _sd(fit: JointFit, k: int) -> FloatArray:
@@ -1117,18 +1094,21 @@ def _regional_fac(
     from orbitcal.diagnose.effects import FAC_CENTRES_DEG, FAC_WIDTH_DEG
 
     # Both directions perpendicular to B, latitude bumps as the catalogue model (one crossing
-    # gives no magnetic-local-time leverage).
+    # gives no magnetic-local-time leverage); only the crossings' samples are ever fitted.
+    idx = np.flatnonzero(hi)
+    mlat_hi = data.mlat_deg[idx]
+    transverse_hi = data.transverse_body[idx]
     cols = []
     for sign in (1.0, -1.0):
         for c in FAC_CENTRES_DEG:
-            bump = np.exp(-0.5 * ((sign * data.mlat_deg - c) / FAC_WIDTH_DEG) ** 2)
-            if float(np.max(bump[hi], initial=0.0)) < 0.05:
+            bump = np.exp(-0.5 * ((sign * mlat_hi - c) / FAC_WIDTH_DEG) ** 2)
+            if float(np.max(bump, initial=0.0)) < 0.05:
                 continue
             for k in range(2):
-                cols.append(data.transverse_body[:, k, :] * bump[:, None])
+                cols.append(transverse_hi[:, k, :] * bump[:, None])
     if not cols:
         return None
-    g_all = np.stack(cols, axis=2)
+    g_hi = np.stack(cols, axis=2)
     b_hat = data.b_hat_body
     par = np.sum(r_now * b_hat, axis=1)
     perp = r_now - par[:, None] * b_hat
@@ -1138,17 +1118,16 @@ def _regional_fac(
     par_hi = float(np.sqrt(np.mean(par[hi] ** 2)))
     # Cross-validated within the crossings: consecutive FAC_CV_CHUNK_S chunks are dealt round-robin
     # to FAC_CV_FOLDS folds; the bumps fitted on the other folds predict each fold.
-    idx = np.flatnonzero(hi)
     chunk = ((data.t_utc_s[idx] - data.t_utc_s[idx[0]]) // FAC_CV_CHUNK_S).astype(int)
     fold = chunk % FAC_CV_FOLDS
     pred = np.zeros((idx.size, 3))
     for f in range(FAC_CV_FOLDS):
-        fit_rows, test_rows = idx[fold != f], idx[fold == f]
-        if test_rows.size == 0:
+        fit_rows, test_rows = fold != f, fold == f
+        if not np.any(test_rows):
             continue
-        g = g_all[fit_rows].reshape(-1, g_all.shape[2])
-        coef = np.linalg.lstsq(g, r_now[fit_rows].reshape(-1), rcond=None)[0]
-        pred[fold == f] = g_all[test_rows] @ coef
+        g = g_hi[fit_rows].reshape(-1, g_hi.shape[2])
+        coef = np.linalg.lstsq(g, r_now[idx[fit_rows]].reshape(-1), rcond=None)[0]
+        pred[test_rows] = g_hi[test_rows] @ coef
     rms_after = vector_rms_nt(r_now[hi] - pred)
     significant = bool(
         rms_hi > 3.0 * rms_lo and perp_hi > 2.0 * par_hi and rms_after < 0.75 * rms_hi

@@ -26,7 +26,7 @@ import contextlib
 import itertools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cached_property, partial
 
 import numpy as np
 import numpy.typing as npt
@@ -421,21 +421,28 @@ class DesignBlock:
 
     Attributes
     ----------
-    g : ndarray, shape (N, 3, p)
-        Regressors in the sensor/body frame; parameter ``k`` adds ``c[k] * g[:, :, k]`` [nT].
+    source : ndarray, shape (N, 3, p), or callable
+        The regressors, or a function that builds them when asked (alternatives of which only
+        one is kept, so that they need not all be held at once: memory grows with N).
     names : list of str
         Parameter names with their units, e.g. ``"dt_s"``.
     variant : str
         Which form of the model was used (e.g. ``"trend"`` or ``"step"`` for drift).
-    alternatives : tuple of DesignBlock
+    alternatives : sequence of DesignBlock
         Other forms of the same effect; the attribution keeps the one that fits the *training*
         blocks best (never the held-out ones).
     """
 
-    g: FloatArray
+    source: FloatArray | Callable[[], FloatArray]
     names: list[str]
     variant: str = ""
-    alternatives: tuple[DesignBlock, ...] = ()
+    alternatives: Sequence[DesignBlock] = ()
+
+    @property
+    def g(self) -> FloatArray:
+        """Regressors in the sensor/body frame, shape (N, 3, p); parameter ``k`` adds
+        ``c[k] * g[:, :, k]`` [nT]. Built on every access when :attr:`source` is a function."""
+        return self.source() if callable(self.source) else self.source
 
 
 DesignFn = Callable[[DiagnosisData, BoolArray], DesignBlock | None]
@@ -683,13 +690,18 @@ def _design_drift(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
     span = float(t_train[-1] - t_train[0]) if t_train.size > 1 else 0.0
     if span <= 0.0:
         return best
+    names = [n + "_step_nt" for n in names_b + names_s] + [n + "_nt_per_day" for n in names_b]
+
+    def step_at(ts: float) -> FloatArray:
+        h = (data.t_utc_s >= ts).astype(float)
+        return np.concatenate([block(h), _per_axis([tau])], axis=2)
+
+    # Built when the fit asks for them: 17 step designs held at once took 300 MB at 86,400
+    # samples.
     steps = []
     for frac in np.linspace(0.1, 0.9, 17):
         ts = float(t_train[0] + frac * span)
-        h = (data.t_utc_s >= ts).astype(float)
-        g = np.concatenate([block(h), _per_axis([tau])], axis=2)
-        names = [n + "_step_nt" for n in names_b + names_s] + [n + "_nt_per_day" for n in names_b]
-        steps.append(DesignBlock(g, names, variant=f"step@{ts:.0f}+trend"))
+        steps.append(DesignBlock(partial(step_at, ts), names, variant=f"step@{ts:.0f}+trend"))
     return DesignBlock(best.g, best.names, best.variant, alternatives=tuple(steps))
 
 

@@ -1,0 +1,97 @@
+"""The joint fit's design accumulated a block of samples at a time equals the dense design."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_diagnose_worlds import make_world
+
+from orbitcal.diagnose import blocked
+from orbitcal.diagnose.attribution import fit_joint, time_blocks
+from orbitcal.diagnose.blocked import BlockedDesign
+from orbitcal.diagnose.effects import FIELD_SCALE_NT, DesignBlock, DiagnosisData, get_effect
+
+
+def _dense(data: DiagnosisData, blocks: list[DesignBlock]) -> tuple[np.ndarray, np.ndarray]:
+    """The whole unit-scaled design (3N, p) and its column scales, formed at once."""
+    b = data.b_ref_body_nt / FIELD_SCALE_NT
+    p = 12 + sum(len(bl.names) for bl in blocks)
+    x = np.zeros((data.n, 3, p))
+    for i in range(3):
+        x[:, i, 3 * i : 3 * i + 3] = b
+        x[:, i, 9 + i] = 1.0
+    x[:, :, 12:] = np.concatenate([bl.g for bl in blocks], axis=2)
+    x2 = x.reshape(3 * data.n, p)
+    scale = np.sqrt(np.mean(x2**2, axis=0))
+    q, _ = np.linalg.qr(x2[:, :12])
+    eff = x2[:, 12:]
+    rest = np.sqrt(np.mean((eff - q @ (q.T @ eff)) ** 2, axis=0))
+    scale[12:] = np.maximum(rest, 1e-6 * scale[12:])
+    return x2 / scale, scale
+
+
+@pytest.fixture(scope="module")
+def world() -> tuple[DiagnosisData, np.ndarray, list[DesignBlock]]:
+    data = make_world("crustal_field", attitude="tumbling", seed=3).data
+    train, _, _ = time_blocks(data.t_utc_s)
+    blocks = []
+    for name in ("crustal_field", "parameter_drift", "time_offset"):
+        bl = get_effect(name).design(data, train)
+        assert bl is not None
+        blocks.append(bl)
+    return data, train, blocks
+
+
+@pytest.mark.parametrize("block_samples", [1, 7, 100, 10**6])
+def test_blocked_products_equal_the_dense_design(world, block_samples: int) -> None:
+    data, train, blocks = world
+    x, scale = _dense(data, blocks)
+    d = BlockedDesign(data, blocks, block_samples=block_samples)
+    np.testing.assert_allclose(d.scale, scale, rtol=1e-10)
+    index = np.flatnonzero(train)
+    rows = np.repeat(train, 3)
+    xt = x[rows]
+    y = data.b_raw_nt[index].reshape(-1)
+    w = np.random.default_rng(0).uniform(0.0, 1.0, y.size)
+    gram, rhs = d.normal_equations(index, y, w)
+    np.testing.assert_allclose(gram, xt.T @ (xt * w[:, None]), rtol=1e-10, atol=1e-9 * gram.max())
+    np.testing.assert_allclose(rhs, (xt * w[:, None]).T @ y, rtol=1e-10, atol=1e-9 * abs(rhs).max())
+    theta = np.linalg.solve(gram, rhs)
+    np.testing.assert_allclose(d.residual(index, y, theta), y - xt @ theta, atol=1e-9)
+    # Least squares through the block-updated QR factor = numpy's on the whole matrix.
+    dense = np.linalg.lstsq(xt, y, rcond=None)[0]
+    np.testing.assert_allclose(d.lstsq(index, y), dense, rtol=1e-7, atol=1e-9 * abs(dense).max())
+    sw = np.sqrt(w)
+    dense_w = np.linalg.lstsq(xt * sw[:, None], y * sw, rcond=None)[0]
+    np.testing.assert_allclose(
+        d.lstsq(index, y, w), dense_w, rtol=1e-7, atol=1e-9 * abs(dense_w).max()
+    )
+
+
+def test_plain_joint_fit_is_the_dense_normal_equation_solve(world) -> None:
+    data, train, blocks = world
+    fit = fit_joint(data, train, blocks, robust=False, bounded=False)
+    x, scale = _dense(data, blocks)
+    xt = x[np.repeat(train, 3)]
+    y = data.b_raw_nt[train].reshape(-1)
+    p = x.shape[1]
+    ridge = np.diag(np.r_[np.full(12, 1e-10), np.full(p - 12, 1e-5)]) * xt.shape[0]
+    theta = np.linalg.solve(xt.T @ xt + ridge, xt.T @ y) / scale
+    np.testing.assert_allclose(fit.a.ravel(), theta[:9] / FIELD_SCALE_NT, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(fit.o_nt, theta[9:12], rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(np.concatenate(fit.coef), theta[12:], rtol=1e-8, atol=1e-10)
+
+
+def test_robust_bounded_fit_does_not_depend_on_the_block_size(world, monkeypatch) -> None:
+    data, train, blocks = world
+    fits = []
+    for size in (5, 10**6):
+        monkeypatch.setattr(blocked, "FIT_BLOCK_SAMPLES", size)
+        fits.append(fit_joint(data, train, blocks))
+    a, b = fits
+    np.testing.assert_allclose(a.a, b.a, rtol=1e-10, atol=1e-13)
+    np.testing.assert_allclose(a.o_nt, b.o_nt, rtol=1e-9, atol=1e-9)
+    for ca, cb in zip(a.coef, b.coef, strict=True):
+        np.testing.assert_allclose(ca, cb, rtol=1e-8, atol=1e-10)
+    assert a.sigma_nt == pytest.approx(b.sigma_nt, rel=1e-9)
+    np.testing.assert_allclose(a.cov_cal, b.cov_cal, rtol=1e-7, atol=1e-20)
