@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from orbitcal.errors import BadInputError, LimitExceededError
+from orbitcal.errors import LimitExceededError, UnreadableInputError, reading_untrusted_input
 
 __all__ = [
     "DEFAULT_APID",
@@ -68,8 +68,8 @@ _PACKET_DTYPE = np.dtype(
 assert _PACKET_DTYPE.itemsize == PACKET_LENGTH
 
 
-class PacketError(BadInputError):
-    """A packet stream that cannot be decoded at all (e.g. empty)."""
+class PacketError(UnreadableInputError):
+    """A packet stream that cannot be decoded at all (e.g. empty); HTTP 400, exit code 2."""
 
 
 @dataclass(frozen=True)
@@ -206,7 +206,21 @@ def decode_packets(
 
     Truncated packets, packets of another length or APID are reported in ``rejected`` by their
     0-based packet number; the valid ones are decoded.
+
+    Raises
+    ------
+    PacketError
+        No packets at all, or a stream the decoder could not read.
+    LimitExceededError
+        More than ``max_packets`` packets.
     """
+    # ``data`` is untrusted (an upload) and goes through ccsdspy and numpy: what they raise on
+    # hostile bytes that the scan did not foresee becomes a PacketError (logged as a reader bug).
+    with reading_untrusted_input("packet stream", error=PacketError):
+        return _decode_packets(data, apid, max_packets)
+
+
+def _decode_packets(data: bytes, apid: int | None, max_packets: int) -> DecodedPackets:
     if not data:
         raise PacketError("no packets: the body is empty")
     if len(data) // PACKET_LENGTH > max_packets:

@@ -8,6 +8,7 @@ statuses in one place, without catching built-in exception types:
 class                      what the caller can do                          exit   HTTP
 =========================  ==============================================  =====  ====
 ``BadInputError``          fix the named row/field of the input              2     422
+``UnreadableInputError``   send the input in the declared format/encoding    2     400
 ``LimitExceededError``     send less (a documented limit was exceeded)       2     413
 ``OutOfRangeError``        use another model or drop the samples             2     422
 ``NotEnoughDataError``     collect more data (or more varied data)           3     422
@@ -17,10 +18,15 @@ class                      what the caller can do                          exit 
 =========================  ==============================================  =====  ====
 
 Every class also derives from ``ValueError`` so code written before the tree existed keeps working;
-new code catches :class:`OrbitcalError` or a subclass.
+new code catches :class:`OrbitcalError` or a subclass. :func:`reading_untrusted_input` is the one
+last resort for readers of untrusted bytes (see its docstring for when it may be used).
 """
 
 from __future__ import annotations
+
+import logging
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 __all__ = [
     "BadInputError",
@@ -31,6 +37,8 @@ __all__ = [
     "OrbitcalError",
     "OutOfRangeError",
     "StaleDataError",
+    "UnreadableInputError",
+    "reading_untrusted_input",
 ]
 
 
@@ -66,6 +74,16 @@ class BadInputError(OrbitcalError):
         self.row = row
         self.field = field
         super().__init__(message)
+
+
+class UnreadableInputError(BadInputError):
+    """The input as a whole cannot be read: not the declared format, encoding or compression.
+
+    Nothing of it was used; send it again as what it claims to be (HTTP 400, a malformed request,
+    where :class:`BadInputError` is a readable input with wrong values, 422).
+    """
+
+    http_status = 400
 
 
 class LimitExceededError(BadInputError):
@@ -105,3 +123,45 @@ class ConflictError(OrbitcalError):
 
     exit_code = 5
     http_status = 409
+
+
+#: The built-in exceptions a third-party reader (pandas, pyarrow, orjson, zlib, struct) may raise on
+#: hostile bytes that no check before it foresaw.
+_READER_FAILURES: tuple[type[Exception], ...] = (
+    ValueError,
+    TypeError,
+    KeyError,
+    IndexError,
+    OverflowError,
+)
+
+
+@contextmanager
+def reading_untrusted_input(
+    what: str, *, field: str | None = None, error: type[BadInputError] = UnreadableInputError
+) -> Iterator[None]:
+    """Last resort around a reader of untrusted bytes: an unforeseen failure becomes ``error``.
+
+    Only for code that hands bytes a user controls to third-party parsers, whose exceptions on
+    hostile input are not documented and cannot all be foreseen by checks before them: the user
+    gets a clear "could not be read" naming ``what`` (and ``field``) instead of a crash or an
+    HTTP 500, and the failure is logged with its traceback as a reader bug to fix. Errors of the
+    tree pass through unchanged. Anywhere else raise the typed error where the problem is found.
+
+    Parameters
+    ----------
+    what : str
+        The input, as the message names it (e.g. ``"csv body"``).
+    field : str, optional
+        The field, option or header to name in the error.
+    error : type of BadInputError
+        The class to raise (default :class:`UnreadableInputError`).
+    """
+    try:
+        yield
+    except OrbitcalError:
+        raise
+    except _READER_FAILURES as exc:
+        logging.getLogger("orbitcal.readers").error("%s could not be read", what, exc_info=exc)
+        message = f"the {what} could not be read ({type(exc).__name__}: {exc})"[:500]
+        raise error(message, field=field) from None

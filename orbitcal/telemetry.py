@@ -59,7 +59,7 @@ import pyarrow.compute as pc
 import pyarrow.csv as pa_csv
 import pyarrow.parquet as pq
 
-from orbitcal.errors import BadInputError, LimitExceededError
+from orbitcal.errors import LimitExceededError, UnreadableInputError, reading_untrusted_input
 from orbitcal.timescales import (
     TIME_SCALES,
     TimeScaleError,
@@ -262,11 +262,11 @@ _EXTENSIONS: dict[str, TelemetryFormat] = {
 _KNOWN_COLUMNS = frozenset(REQUIRED_COLUMNS).union(*OPTIONAL_GROUPS.values())
 
 
-class TelemetryError(BadInputError):
+class TelemetryError(UnreadableInputError):
     """The table as a whole cannot be read (missing column, bad format, unknown time scale).
 
     Fix the file or the option named in the message; row-level problems never raise, they are
-    returned as :class:`RowError` entries.
+    returned as :class:`RowError` entries. HTTP 400 (a malformed upload), exit code 2.
     """
 
 
@@ -490,18 +490,24 @@ def parse_telemetry(
     """
     _check_time_scale(time_scale)
     pre_errors: dict[int, str] = {}
-    if fmt == "csv":
-        df, pre_errors = _read_csv_bytes(data, limits)
-    elif fmt == "parquet":
-        df = _read_parquet_bytes(data, limits)
-    elif fmt == "ndjson":
-        df, pre_errors = _read_ndjson_bytes(data, limits)
-    elif fmt == "json":
-        df, pre_errors = _read_json_array_bytes(data, limits)
-    else:
-        raise TelemetryError(f"unknown telemetry format {fmt!r}; use csv, ndjson, json or parquet")
-    _check_frame(df, limits)
-    return _validate(df, time_scale=time_scale, pre_errors=pre_errors)
+    # ``data`` is untrusted (an upload) and goes through pandas, pyarrow and orjson: what they
+    # raise on hostile bytes that the checks above them did not foresee becomes a TelemetryError
+    # naming the format (and is logged as a reader bug), never a crash.
+    with reading_untrusted_input(f"{fmt} table", error=TelemetryError):
+        if fmt == "csv":
+            df, pre_errors = _read_csv_bytes(data, limits)
+        elif fmt == "parquet":
+            df = _read_parquet_bytes(data, limits)
+        elif fmt == "ndjson":
+            df, pre_errors = _read_ndjson_bytes(data, limits)
+        elif fmt == "json":
+            df, pre_errors = _read_json_array_bytes(data, limits)
+        else:
+            raise TelemetryError(
+                f"unknown telemetry format {fmt!r}; use csv, ndjson, json or parquet"
+            )
+        _check_frame(df, limits)
+        return _validate(df, time_scale=time_scale, pre_errors=pre_errors)
 
 
 def from_frame(

@@ -15,9 +15,12 @@ the first second of the next day. ``tai_to_utc`` maps a TAI instant inside a lea
 
 from __future__ import annotations
 
+import contextlib
+import math
 import re
 import threading
 from collections.abc import Iterable, Sequence
+from datetime import datetime
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -32,6 +35,7 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = [
     "GPS_MINUS_TAI_S",
     "LEAP_SECOND_TABLE",
+    "MAX_ABS_INSTANT_S",
     "MJD2000_EPOCH_UTC_S",
     "TIME_SCALES",
     "TimeScaleError",
@@ -41,6 +45,7 @@ __all__ = [
     "iso_to_utc_s",
     "leap_seconds_expiry_utc_s",
     "mjd2000_to_utc_s",
+    "parse_instant_utc_s",
     "parse_time_values",
     "reset_tables",
     "skyfield_timescale",
@@ -440,6 +445,58 @@ def _datetime_series_to_s(dt: pd.Series | pd.DatetimeIndex) -> FloatArray:
     out = whole.astype(np.float64) + frac.astype(np.float64) * 1e-9
     out[nat] = np.nan
     return out
+
+
+#: The instants :func:`parse_instant_utc_s` accepts: ±10^11 s around 1970 (years −1200 .. 5100).
+MAX_ABS_INSTANT_S = 1e11
+
+
+def parse_instant_utc_s(value: float | str, *, field: str, numeric_text: bool = False) -> float:
+    """One instant a user gave (e.g. an end of a time range): ISO-8601 with a UTC offset, or
+    POSIX seconds.
+
+    Parameters
+    ----------
+    value : float or str
+        POSIX seconds of UTC, or an ISO-8601 string naming its offset (``...Z``, ``+02:00``).
+    field : str
+        The option or key the value came from; the error names it.
+    numeric_text : bool
+        Also read a string holding a number (``"1659312000"``, ``"nan"``) as POSIX seconds, before
+        trying ISO-8601 (for values that arrive as text, such as URL query parameters).
+
+    Returns
+    -------
+    float
+        POSIX seconds of UTC [s], finite and within ±:data:`MAX_ABS_INSTANT_S`.
+
+    Raises
+    ------
+    BadInputError
+        ``"<field>: <reason>"`` with ``field`` set: not an ISO-8601 time, no UTC offset, not
+        finite or beyond ±10^11 s.
+    """
+
+    def bad(why: str) -> BadInputError:
+        return BadInputError(f"{field}: {why}", field=field)
+
+    if isinstance(value, str) and numeric_text:
+        with contextlib.suppress(ValueError):  # not a number: read as ISO-8601 below
+            value = float(value)
+    if isinstance(value, str):
+        try:
+            stamp = datetime.fromisoformat(value.strip())
+        except ValueError:
+            raise bad(f"{value[:40]!r} is not an ISO-8601 time") from None
+        if stamp.tzinfo is None:
+            raise bad("the time needs a UTC offset (e.g. a trailing 'Z')")
+        seconds = stamp.timestamp()
+    else:
+        # an integer too large for a float (10^400) is out of range like any other
+        seconds = float(value) if abs(value) <= MAX_ABS_INSTANT_S else math.inf
+    if not math.isfinite(seconds) or abs(seconds) > MAX_ABS_INSTANT_S:
+        raise bad(f"{f'{value!r}'[:40]} is not a finite time within ±1e11 s of 1970")
+    return seconds
 
 
 def iso_to_utc_s(iso: Sequence[str] | str) -> FloatArray:

@@ -305,9 +305,7 @@ def create_app(
 
     @app.exception_handler(HTTPException)
     async def _http_error(_request: Request, exc: HTTPException) -> JSONResponse:
-        field = (exc.headers or {}).get("X-Error-Field")
-        errors = [{"field": field, "reason": exc.detail}] if field else []
-        return _error(exc.status_code, str(exc.detail), errors, dict(exc.headers or {}))
+        return _error(exc.status_code, str(exc.detail), headers=dict(exc.headers or {}))
 
     @app.exception_handler(OrbitcalError)
     async def _library_error(_request: Request, exc: OrbitcalError) -> JSONResponse:

@@ -16,7 +16,12 @@ from sqlalchemy.engine import Connection, Engine
 from service.settings import Settings
 from service.storage import Spacecraft
 
-__all__ = ["EngineDep", "SettingsDep", "get_spacecraft", "iso", "iso_or_none"]
+__all__ = ["MAX_ROW_ID", "EngineDep", "SettingsDep", "get_spacecraft", "iso", "iso_or_none"]
+
+#: The largest id a table's ``sa.Integer`` primary key holds (PostgreSQL ``integer``, 32 bits):
+#: integer ids in paths and bodies are validated against it (422), so a huge id is never sent to
+#: the database (it answered 500: "integer out of range", SQLite's OverflowError).
+MAX_ROW_ID = 2**31 - 1
 
 
 async def _engine(request: Request) -> Engine:

@@ -12,6 +12,7 @@ import orjson
 import pandas as pd
 
 from orbitcal import ccsds
+from orbitcal.errors import LimitExceededError, UnreadableInputError
 from orbitcal.telemetry import RowError, Telemetry, TelemetryError, from_frame, parse_telemetry
 
 __all__ = [
@@ -38,8 +39,19 @@ MEDIA_TYPES: dict[str, str] = {
 }
 
 
-class BodyTooLargeError(ValueError):
-    """The (decompressed) body exceeds the configured limit."""
+class BodyTooLargeError(LimitExceededError):
+    """The (decompressed) body exceeds the configured limit ``max_body_bytes`` (HTTP 413)."""
+
+    def __init__(self, limit: int) -> None:
+        super().__init__(
+            f"decompressed body exceeds {limit} bytes (max_body_bytes)",
+            limit_name="max_body_bytes",
+            limit=limit,
+        )
+
+
+def _bad_encoding(message: str) -> UnreadableInputError:
+    return UnreadableInputError(message, field="Content-Encoding")
 
 
 @dataclass(frozen=True)
@@ -59,23 +71,26 @@ def decompress(body: bytes, encoding: str, *, limit: int) -> bytes:
     Raises
     ------
     BodyTooLargeError
-        The decompressed body exceeds ``limit`` bytes.
-    ValueError
-        Unsupported encoding, or a corrupt, truncated or trailing-garbage stream.
+        The decompressed body exceeds ``limit`` bytes (HTTP 413).
+    UnreadableInputError
+        Unsupported encoding, or a corrupt, truncated or trailing-garbage stream (HTTP 400,
+        naming the ``Content-Encoding`` field).
     """
     codings = [c.strip().lower() for c in encoding.split(",") if c.strip()]
     codings = [c for c in codings if c != "identity"]
     if not codings:
         return body
     if len(codings) > 1:
-        raise ValueError(
+        raise _bad_encoding(
             f"Content-Encoding {encoding!r}: only one coding (gzip or deflate) is supported"
         )
     coding = {"x-gzip": "gzip"}.get(codings[0], codings[0])
     if coding not in ("gzip", "deflate"):
-        raise ValueError(f"Content-Encoding {coding!r} is not supported; use gzip, deflate or none")
+        raise _bad_encoding(
+            f"Content-Encoding {coding!r} is not supported; use gzip, deflate or none"
+        )
     if not body:
-        raise ValueError(f"body is empty but declares Content-Encoding {coding}")
+        raise _bad_encoding(f"body is empty but declares Content-Encoding {coding}")
     wbits = 16 + zlib.MAX_WBITS if coding == "gzip" else zlib.MAX_WBITS
     out: list[bytes] = []
     size = 0
@@ -86,13 +101,15 @@ def decompress(body: bytes, encoding: str, *, limit: int) -> bytes:
         try:
             chunk = d.decompress(rest, limit - size + 1)
         except zlib.error as exc:
-            raise ValueError(f"body is not valid {coding} (member {member + 1}): {exc}") from None
+            raise _bad_encoding(
+                f"body is not valid {coding} (member {member + 1}): {exc}"
+            ) from None
         size += len(chunk)
         if size > limit or d.unconsumed_tail:
-            raise BodyTooLargeError(f"decompressed body exceeds {limit} bytes (max_body_bytes)")
+            raise BodyTooLargeError(limit)
         out.append(chunk)
         if not d.eof:
-            raise ValueError(
+            raise _bad_encoding(
                 f"{coding} stream is truncated: it ends before its end marker and checksum "
                 f"(member {member + 1}); nothing was stored"
             )
@@ -102,7 +119,7 @@ def decompress(body: bytes, encoding: str, *, limit: int) -> bytes:
         if coding == "gzip" and rest[:2] == b"\x1f\x8b":
             member += 1  # another gzip member: read it too
             continue
-        raise ValueError(
+        raise _bad_encoding(
             f"{len(rest)} bytes follow the end of the {coding} stream: the body must end where "
             "the compressed data ends; nothing was stored"
         )
@@ -127,7 +144,8 @@ def _packets_to_frame(decoded: ccsds.DecodedPackets) -> pd.DataFrame:
 def parse_body(body: bytes, *, fmt: str, time_scale: str, apid: int | None = None) -> ParsedUpload:
     """Validate an upload; row numbers in ``rejected`` are 0-based rows (packets for CCSDS).
 
-    Raises ``TelemetryError`` / ``ccsds.PacketError`` when nothing can be read at all.
+    Raises ``TelemetryError`` / ``ccsds.PacketError`` (HTTP 400) when nothing can be read at all,
+    ``LimitExceededError`` (413) beyond a parsing limit; the service's one handler answers them.
     """
     if fmt != "ccsds":
         result = parse_telemetry(body, fmt=fmt, time_scale=time_scale)  # type: ignore[arg-type]

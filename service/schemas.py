@@ -46,11 +46,15 @@ class ScheduleIn(BaseModel):
     """Per-spacecraft overrides of the retraining schedule."""
 
     model_config = ConfigDict(extra="forbid")
+    # Finite and bounded: the schedule is stored as JSON (PostgreSQL refused Infinity: a 500) and
+    # sample counts are 64-bit.
     cadence_s: float | None = Field(
-        default=None, gt=0, description="retrain at most this often [s]"
+        default=None, gt=0, allow_inf_nan=False, description="retrain at most this often [s]"
     )
-    min_new_samples: int | None = Field(default=None, ge=0)
-    window_s: float | None = Field(default=None, gt=0, description="sliding window [s]")
+    min_new_samples: int | None = Field(default=None, ge=0, lt=2**63)
+    window_s: float | None = Field(
+        default=None, gt=0, allow_inf_nan=False, description="sliding window [s]"
+    )
 
 
 class _OrbitFields(BaseModel):
@@ -113,7 +117,7 @@ class IngestResult(BaseModel):
 class RetrainIn(BaseModel):
     model_config = ConfigDict(extra="forbid")
     method: str | None = Field(default=None, max_length=64)
-    window_s: float | None = Field(default=None, gt=0)
+    window_s: float | None = Field(default=None, gt=0, allow_inf_nan=False)
     seed: int | None = Field(default=None, ge=0, lt=2**63)
 
 

@@ -429,3 +429,34 @@ def test_repeated_columns_and_non_utf8_text_name_the_place() -> None:
         parse_telemetry(b"time,b_x,b_x,b_z\n1690000000,1,2,3\n", fmt="csv")
     with pytest.raises(TelemetryError, match="row 1 is not UTF-8"):
         parse_telemetry(b"time,b_x,b_y,b_z,hk_s\n1,2,3,4,a\n2,2,3,4,\xe9\n", fmt="csv")
+
+
+def test_a_reader_failure_nobody_foresaw_is_a_telemetry_error_not_a_crash(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The last resort around the third-party readers (orbitcal.errors.reading_untrusted_input)."""
+    import orbitcal.telemetry as telemetry_module
+    from orbitcal.errors import UnreadableInputError
+
+    def broken_reader(data: bytes, limits: object) -> None:
+        raise KeyError("a pandas internal")
+
+    monkeypatch.setattr(telemetry_module, "_read_csv_bytes", broken_reader)
+    with pytest.raises(TelemetryError, match=r"the csv table could not be read \(KeyError") as info:
+        parse_telemetry(b"time,b_x,b_y,b_z\n1690000000,1,2,3\n", fmt="csv")
+    assert isinstance(info.value, UnreadableInputError) and info.value.http_status == 400
+    assert info.value.exit_code == 2
+
+
+def test_an_undecodable_packet_stream_is_a_packet_error(monkeypatch: pytest.MonkeyPatch) -> None:
+    from orbitcal import ccsds
+
+    def broken_scan(data: bytes, apid: object, max_packets: int) -> None:
+        raise IndexError("index 7 is out of bounds")
+
+    monkeypatch.setattr(ccsds, "_scan", broken_scan)
+    with pytest.raises(ccsds.PacketError, match="packet stream could not be read") as info:
+        ccsds.decode_packets(b"\x08" * 64)
+    assert info.value.http_status == 400
+    with pytest.raises(ccsds.PacketError, match="no packets"):
+        ccsds.decode_packets(b"")

@@ -177,3 +177,29 @@ def test_iso_round_trip_property_1900_2200(t_us: int) -> None:
     back, errors = ts.parse_time_values([iso])
     assert not errors
     assert abs(back[0] - t) < 1e-6
+
+
+def test_one_instant_from_a_user_iso_or_seconds_and_errors_name_the_field() -> None:
+    from orbitcal.errors import BadInputError
+
+    assert ts.parse_instant_utc_s("2022-08-01T00:00:00Z", field="start") == 1_659_312_000.0
+    assert ts.parse_instant_utc_s("2022-08-01T02:00:00+02:00", field="start") == 1_659_312_000.0
+    assert ts.parse_instant_utc_s(1_659_312_000, field="start") == 1_659_312_000.0
+    # numeric text is seconds only where asked (query parameters); else it must be ISO-8601
+    assert ts.parse_instant_utc_s("1659312000", field="end", numeric_text=True) == 1_659_312_000.0
+    cases: list[tuple[float | str, bool, str]] = [
+        ("1659312000", False, "is not an ISO-8601 time"),
+        ("yesterday", True, "'yesterday' is not an ISO-8601 time"),
+        ("2022-08-01T00:00:00", False, "needs a UTC offset"),
+        ("nan", True, "nan is not a finite time within ±1e11 s of 1970"),
+        (float("-inf"), False, "-inf is not a finite time"),
+        (1e300, False, "1e+300 is not a finite time"),
+        (10**400, False, "is not a finite time"),  # too large for a float: no OverflowError
+        (-(10**30), False, "is not a finite time"),
+    ]
+    for value, numeric_text, message in cases:
+        with pytest.raises(BadInputError) as info:
+            ts.parse_instant_utc_s(value, field="end", numeric_text=numeric_text)
+        assert message in str(info.value)
+        assert info.value.field == "end" and str(info.value).startswith("end: ")
+        assert len(str(info.value)) < 120  # a huge value is cut, not echoed whole

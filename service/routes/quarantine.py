@@ -9,17 +9,17 @@ on the samples (the diagnosis) are recomputed.
 
 from __future__ import annotations
 
-import math
 import time
-from datetime import datetime
 from typing import Annotated, Any, Literal
 
 import sqlalchemy as sa
-from fastapi import APIRouter, HTTPException, Query
+from fastapi import APIRouter, HTTPException, Path, Query
 from pydantic import BaseModel, ConfigDict, Field
 
+from orbitcal.errors import BadInputError
+from orbitcal.timescales import parse_instant_utc_s
 from service.auth import Principal, require_scope
-from service.deps import EngineDep, get_spacecraft, iso, iso_or_none
+from service.deps import MAX_ROW_ID, EngineDep, get_spacecraft, iso, iso_or_none
 from service.schemas import ErrorPublic
 from service.storage import (
     DataAudit,
@@ -41,9 +41,6 @@ _ERRORS: dict[int | str, dict[str, Any]] = {
     409: {"model": ErrorPublic},
     422: {"model": ErrorPublic},
 }
-
-#: Times accepted for a range: ±10^11 s around 1970 (years −1200 .. 5100).
-_MAX_ABS_S = 1e11
 
 TimeIn = Annotated[
     float | str,
@@ -94,37 +91,14 @@ class AuditPublic(BaseModel):
     reason: str | None = None
 
 
-def _utc_us(value: float | str, name: str) -> int:
-    """An ISO-8601 (with offset) or Unix-seconds time → UTC µs; 422 naming the field."""
-
-    def bad(why: str) -> HTTPException:
-        return HTTPException(
-            status_code=422, detail=f"{name}: {why}", headers={"X-Error-Field": name}
-        )
-
-    if isinstance(value, str):
-        try:
-            stamp = datetime.fromisoformat(value.strip())
-        except ValueError:
-            raise bad(f"{value[:40]!r} is not an ISO-8601 time") from None
-        if stamp.tzinfo is None:
-            raise bad("the time needs a UTC offset (e.g. a trailing 'Z')")
-        seconds = stamp.timestamp()
-    else:
-        seconds = float(value)
-    if not math.isfinite(seconds) or abs(seconds) > _MAX_ABS_S:
-        raise bad(f"{value!r} is not a finite time within ±1e11 s of 1970")
-    return round(seconds * 1e6)
-
-
-def _range(start: float | str, end: float | str) -> tuple[int, int]:
-    start_us, end_us = _utc_us(start, "start"), _utc_us(end, "end")
+def _range(start: float | str, end: float | str, *, numeric_text: bool = False) -> tuple[int, int]:
+    """The range's ends in UTC µs; the library's BadInputError (422) names a bad end."""
+    start_us, end_us = (
+        round(parse_instant_utc_s(value, field=name, numeric_text=numeric_text) * 1e6)
+        for value, name in ((start, "start"), (end, "end"))
+    )
     if end_us < start_us:
-        raise HTTPException(
-            status_code=422,
-            detail="end: the range ends before it starts",
-            headers={"X-Error-Field": "end"},
-        )
+        raise BadInputError("end: the range ends before it starts", field="end")
     return start_us, end_us
 
 
@@ -219,7 +193,7 @@ def list_quarantines(
 @router.delete("/{spacecraft_id}/quarantines/{quarantine_id}", responses=_ERRORS)
 def release(
     spacecraft_id: str,
-    quarantine_id: int,
+    quarantine_id: Annotated[int, Path(ge=1, le=MAX_ROW_ID, description="the quarantine's id")],
     engine: EngineDep,
     who: Annotated[Principal, require_scope("ingest")],
 ) -> QuarantinePublic:
@@ -271,14 +245,7 @@ def delete_range(
     end: Annotated[str, Query(description="ISO-8601 with offset, or Unix seconds")],
 ) -> DeletedPublic:
     """Delete the stored samples in ``[start, end]`` for good (quarantined or not)."""
-
-    def parse(text: str) -> float | str:
-        try:
-            return float(text)
-        except ValueError:
-            return text
-
-    start_us, end_us = _range(parse(start), parse(end))
+    start_us, end_us = _range(start, end, numeric_text=True)
     with write_tx(engine) as conn:
         sc = get_spacecraft(conn, spacecraft_id)
         n = delete_samples(conn, sc.pk, start_us, end_us)

@@ -336,6 +336,63 @@ def test_releasing_twice_is_a_conflict_and_an_unknown_id_is_404(backend: Backend
     assert [a["action"] for a in audit] == ["release", "quarantine"]
 
 
+#: Ids no quarantine can have: not positive, or beyond the 32-bit primary key (2^31 and more once
+#: answered 500 on PostgreSQL, "integer out of range", and 2^63 and more on SQLite, OverflowError).
+OUT_OF_RANGE_IDS = ["0", "-1", str(2**31), str(2**63), str(10**30)]
+
+
+def test_an_out_of_range_quarantine_id_is_422_and_releases_nothing(backend: Backend) -> None:
+    with backend.client() as c:
+        sc = _new_spacecraft(c)
+        q = c.post(f"/v1/spacecraft/{sc}/quarantines", json={"start": T0_UTC_S, "end": T0_UTC_S})
+        assert q.status_code == 201, q.text
+        rev = backend.revision(sc)
+        for qid in OUT_OF_RANGE_IDS:
+            r = c.delete(f"/v1/spacecraft/{sc}/quarantines/{qid}")
+            assert r.status_code == 422, (qid, r.text)
+            assert r.json()["errors"][0]["field"] == "path.quarantine_id", r.text
+        active = c.get(f"/v1/spacecraft/{sc}/quarantines", params={"active": True}).json()
+    assert [a["id"] for a in active] == [q.json()["id"]]
+    assert backend.revision(sc) == rev
+
+
+#: Numbers no body may carry: JSON 1e400 reads as infinity (PostgreSQL refused it inside the stored
+#: schedule or job parameters: 500; SQLite stored null), integers beyond 64 bits.
+HUGE = "1" + "0" * 400
+SCHEDULE = '{"id": "@", "schedule": {%s}}'
+OUT_OF_RANGE_BODIES: list[tuple[str, str, str, str]] = [
+    ("infinite cadence", "", SCHEDULE % '"cadence_s": 1e400', "schedule.cadence_s"),
+    ("infinite window", "", SCHEDULE % '"window_s": 1e400', "schedule.window_s"),
+    ("huge sample count", "", SCHEDULE % f'"min_new_samples": 1{"0" * 30}', "min_new_samples"),
+    ("infinite retrain window", "/calibrations", '{"window_s": 1e400}', "body.window_s"),
+    ("huge quarantine start", "/quarantines", f'{{"start": {HUGE}, "end": 1}}', "body.start"),
+    ("huge quarantine end", "/quarantines", f'{{"start": 0, "end": -{HUGE}}}', "body.end"),
+]
+
+
+@pytest.mark.parametrize(
+    ("case", "path", "body", "field"), OUT_OF_RANGE_BODIES, ids=[b[0] for b in OUT_OF_RANGE_BODIES]
+)
+def test_an_out_of_range_number_in_a_body_is_422_naming_it_and_stores_nothing(
+    backend: Backend, case: str, path: str, body: str, field: str
+) -> None:
+    sc = f"sat-{next(_COUNTER)}"
+    with backend.client() as c:
+        if path:  # a route of an existing spacecraft
+            assert c.post("/v1/spacecraft", json={"id": sc, "tle": SWARM_A_TLE}).status_code == 201
+            url = f"/v1/spacecraft/{sc}{path}"
+        else:  # the spacecraft's own registration
+            url, body = "/v1/spacecraft", body.replace("@", sc)
+        jobs = int(backend.sql("SELECT COUNT(*) FROM jobs"))
+        r = c.post(url, content=body, headers={"content-type": "application/json"})
+        assert r.status_code == 422, (case, r.text)
+        assert field in r.json()["errors"][0]["field"], (case, r.text)
+        assert (c.get(f"/v1/spacecraft/{sc}").status_code == 200) == bool(path)
+    assert int(backend.sql("SELECT COUNT(*) FROM jobs")) == jobs
+    if path:
+        assert backend.quarantines(sc) == 0
+
+
 def test_delete_by_range_counts_and_removes_for_good(backend: Backend) -> None:
     with backend.client() as c:
         sc = _new_spacecraft(c)
