@@ -22,6 +22,8 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
+from orbitcal.arrays import FloatArray
+
 __all__ = [
     "body_to_frame",
     "frame_to_body",
@@ -34,8 +36,6 @@ __all__ = [
     "wxyz_to_xyzw",
     "xyzw_to_wxyz",
 ]
-
-FloatArray = npt.NDArray[np.float64]
 
 
 def _q(q: npt.ArrayLike) -> FloatArray:

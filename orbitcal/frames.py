@@ -34,6 +34,7 @@ from collections import OrderedDict
 import numpy as np
 import numpy.typing as npt
 
+from orbitcal.arrays import FloatArray
 from orbitcal.timescales import skyfield_timescale, tables_epoch, tai_minus_utc_s
 
 __all__ = [
@@ -60,7 +61,6 @@ __all__ = [
     "teme_to_itrs_matrix",
 ]
 
-FloatArray = npt.NDArray[np.float64]
 
 #: WGS84 semi-major axis [km] (NIMA TR8350.2, 3rd ed., table 3.1).
 WGS84_A_KM = 6378.137

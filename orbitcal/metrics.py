@@ -19,9 +19,10 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
+from orbitcal.arrays import FloatArray
+
 __all__ = ["KEYS", "norm_rms_nt", "primary_key", "rms_nt", "rms_nt_from_norm", "scalar_rms_nt"]
 
-FloatArray = npt.NDArray[np.float64]
 
 #: The three names, in the order documents and answers list them.
 KEYS: tuple[str, ...] = ("rms_nt", "norm_rms_nt", "scalar_rms_nt")

@@ -25,6 +25,7 @@ import numpy as np
 import numpy.typing as npt
 from sgp4.api import SGP4_ERRORS, WGS72, Satrec, SatrecArray
 
+from orbitcal.arrays import FloatArray, IntArray
 from orbitcal.errors import OrbitProblemError
 from orbitcal.frames import teme_to_itrs
 
@@ -48,8 +49,6 @@ __all__ = [
     "tle_checksum",
 ]
 
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
 
 #: Default age [d] beyond which SGP4 elements are reported as stale (LEO TLE accuracy degrades to
 #: km within days; Vallado et al. 2006 discuss 1–3 km at epoch growing ~1–3 km/day).

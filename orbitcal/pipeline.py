@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from orbitcal.arrays import BoolArray, FloatArray
 from orbitcal.calibrate import METHODS, Calibration, FitData, MissingAttitudeError, fit_method
 from orbitcal.calibrate.document import calibration_from_document, calibration_to_document
 from orbitcal.calibrate.errors import TooFewSamplesError, UnknownMethodError
@@ -67,8 +68,6 @@ __all__ = [
     "usable_rows",
 ]
 
-FloatArray = NDArray[np.float64]
-BoolArray = NDArray[np.bool_]
 
 #: A challenger must beat the champion's held-out RMS by at least this fraction [-] …
 PROMOTE_MARGIN = 0.01

@@ -22,6 +22,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from orbitcal.arrays import FloatArray
+
 __all__ = [
     "WANG2020_GROUND_A",
     "WANG2020_GROUND_B0_NT",
@@ -31,7 +33,6 @@ __all__ = [
     "SensorModel",
 ]
 
-FloatArray = npt.NDArray[np.float64]
 
 #: Wang et al. (2020) eq. 15: coefficient matrix of the ground error model.
 WANG2020_GROUND_A: tuple[tuple[float, float, float], ...] = (

@@ -15,6 +15,8 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
+from orbitcal.arrays import FloatArray
+
 __all__ = [
     "AU_KM",
     "R_EARTH_KM",
@@ -25,7 +27,6 @@ __all__ = [
     "sun_position_gcrs_km",
 ]
 
-FloatArray = npt.NDArray[np.float64]
 
 #: Astronomical unit [km] (IAU 2012 resolution B2).
 AU_KM = 149_597_870.7

@@ -59,6 +59,7 @@ import pyarrow.compute as pc
 import pyarrow.csv as pa_csv
 import pyarrow.parquet as pq
 
+from orbitcal.arrays import FloatArray
 from orbitcal.errors import LimitExceededError, UnreadableInputError, reading_untrusted_input
 from orbitcal.timescales import (
     TIME_SCALES,
@@ -89,7 +90,6 @@ __all__ = [
     "write_telemetry",
 ]
 
-FloatArray = npt.NDArray[np.float64]
 TelemetryFormat = Literal["csv", "ndjson", "json", "parquet"]
 
 #: Columns every table must carry (CONTRACT section 1).

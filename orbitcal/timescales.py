@@ -27,6 +27,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from orbitcal.arrays import FloatArray
 from orbitcal.errors import BadInputError
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -63,7 +64,6 @@ __all__ = [
     "utc_to_tai",
 ]
 
-FloatArray = npt.NDArray[np.float64]
 
 #: Time scales accepted by :func:`to_utc_s` (CONTRACT section 2, ``--time-scale``).
 TIME_SCALES = ("UTC", "TAI", "GPS")

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
+from orbitcal.arrays import FloatArray
 from orbitcal.attitude import frame_to_body
 from orbitcal.errors import BadInputError
 from orbitcal.field import DEFAULT_FIELD, FieldModel, get_field
@@ -33,7 +34,6 @@ __all__ = [
     "truth_for_telemetry",
 ]
 
-FloatArray = npt.NDArray[np.float64]
 
 #: Attitude frames the quaternions may refer to (CONTRACT section 1).
 ATTITUDE_FRAMES: tuple[str, ...] = ("GCRS", "ITRS")

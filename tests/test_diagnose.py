@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from contract_doc import CONTRACT_VERDICTS
 from test_diagnose_worlds import make_world
 
 from orbitcal.diagnose import CATALOGUE, EFFECT_NAMES, attribute
@@ -16,22 +17,6 @@ from orbitcal.diagnose.attribution import split_fit_tests
 from orbitcal.diagnose.report import report_html
 
 pytestmark = pytest.mark.usefixtures("single_thread_blas")  # tests/conftest.py
-
-
-CONTRACT_EFFECTS = {
-    "none",
-    "temperature",
-    "magnetorquer",
-    "time_offset",
-    "external_field",
-    "crustal_field",
-    "sun_driven",
-    "nonlinearity",
-    "orbit_error",
-    "parameter_drift",
-    "field_aligned_currents",
-    "attitude_error",
-}
 
 
 def test_public_api_is_pinned() -> None:
@@ -58,7 +43,7 @@ def test_public_api_is_pinned() -> None:
 
 
 def test_catalogue_has_one_model_per_contract_effect() -> None:
-    assert set(EFFECT_NAMES) | {"none"} == CONTRACT_EFFECTS
+    assert set(EFFECT_NAMES) | {"none"} == CONTRACT_VERDICTS
     assert len({e.name for e in CATALOGUE}) == len(CATALOGUE) == 11
     for effect in CATALOGUE:
         assert effect.physics and effect.witness
@@ -144,7 +129,7 @@ def test_report_has_the_contract_keys_and_html_renders() -> None:
     json.dumps(report, allow_nan=False)  # JSON-ready, no NaN
     assert set(report["baseline"]) >= {"method", "holdout_rms_nt"}
     assert report["verdict"] == "external_field"
-    assert report["verdict"] in CONTRACT_EFFECTS
+    assert report["verdict"] in CONTRACT_VERDICTS
     names = [e["name"] for e in report["effects"]]
     assert names[0] == "external_field" and len(set(names)) == len(names)
     for e in report["effects"]:

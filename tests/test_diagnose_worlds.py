@@ -10,12 +10,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
-from orbitcal.diagnose.effects import DiagnosisData, dipole_axis_itrs
-
-FloatArray = npt.NDArray[np.float64]
+from orbitcal.arrays import FloatArray
+from orbitcal.diagnose.effects import DiagnosisData
+from orbitcal.geomag import dipole_axis_itrs
 
 R_EARTH_KM = 6371.2
 OMEGA_EARTH_RAD_S = 7.2921150e-5
@@ -170,7 +169,7 @@ def make_world(
             "nij,nj->ni", i2b, crust_b_itrs_nt(r_itrs, scale=magnitude)
         )
     elif effect == "field_aligned_currents":
-        from orbitcal.diagnose.effects import magnetic_latitude_deg
+        from orbitcal.geomag import magnetic_latitude_deg
 
         mlat = magnetic_latitude_deg(r_itrs)
         env = np.exp(-0.5 * ((np.abs(mlat) - 68.0) / 3.0) ** 2)

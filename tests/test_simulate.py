@@ -8,10 +8,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from contract_doc import CONTRACT_EFFECTS
 from scipy.spatial.transform import Rotation
 
 from orbitcal.attitude import body_to_frame, frame_to_body
 from orbitcal.frames import gcrs_to_itrs
+from orbitcal.geomag import dipole_axis_itrs, magnetic_latitude_deg
+from orbitcal.metrics import norm_rms_nt
 from orbitcal.simulate import (
     EFFECT_NAMES,
     Housekeeping,
@@ -26,24 +29,10 @@ from orbitcal.simulate import (
     select_tle,
     simulate_world,
 )
-from orbitcal.simulate.effects import dipole_axis_itrs, magnetic_latitude_deg
 from orbitcal.telemetry import read_telemetry
 
 START_UTC_S = pd.Timestamp("2023-07-05T00:00:00Z").timestamp()
 SWARM_A = 39452
-CONTRACT_EFFECTS = {
-    "temperature",
-    "magnetorquer",
-    "time_offset",
-    "external_field",
-    "crustal_field",
-    "sun_driven",
-    "nonlinearity",
-    "orbit_error",
-    "parameter_drift",
-    "field_aligned_currents",
-    "attitude_error",
-}
 
 
 @pytest.fixture(scope="module")
@@ -71,10 +60,6 @@ def _inject(state: WorldState, name: str, **params: object) -> tuple[np.ndarray,
     assert inj.db_body_nt.shape == (len(state), 3)
     assert np.all(np.isfinite(inj.db_body_nt))
     return inj.db_body_nt, inj.info
-
-
-def _rms(x: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(np.sum(x**2, axis=1))))
 
 
 def test_catalogue_names_are_the_contract_names() -> None:
@@ -128,7 +113,7 @@ def test_temperature_follows_the_thermal_cycle(state: WorldState) -> None:
         + np.array([3e-5, -2e-5, 2.5e-5]) * state.b_ref_body_nt * d_t
     )
     np.testing.assert_allclose(db, expected, atol=1e-9)
-    assert 10.0 < _rms(db) < 60.0
+    assert 10.0 < norm_rms_nt(db) < 60.0
 
 
 def test_magnetorquer_coupling_is_recovered_from_the_commands(state: WorldState) -> None:
@@ -138,14 +123,14 @@ def test_magnetorquer_coupling_is_recovered_from_the_commands(state: WorldState)
     c_fit, *_ = np.linalg.lstsq(m, db, rcond=None)
     c = np.array([12.0, 2.0, -1.0, 1.5, -9.0, 3.0, -2.0, 1.0, 15.0]).reshape(3, 3)
     np.testing.assert_allclose(c_fit.T, c, atol=1e-9)
-    assert 5.0 < _rms(db) < 60.0
+    assert 5.0 < norm_rms_nt(db) < 60.0
 
 
 def test_time_offset_is_minus_delta_times_the_field_rate(state: WorldState) -> None:
     db, _ = _inject(state, "time_offset", offset_s=0.5)
     rate = np.gradient(state.b_ref_body_nt, state.t_utc_s, axis=0)
     np.testing.assert_allclose(db, -0.5 * rate, atol=0.05 * np.abs(0.5 * rate).max())
-    assert 10.0 < _rms(db) < 40.0  # NOTES: 1 s ≈ 37 nT mean along LEO; nadir rotation adds
+    assert 10.0 < norm_rms_nt(db) < 40.0  # NOTES: 1 s ≈ 37 nT mean along LEO; nadir rotation adds
 
 
 def test_external_field_is_uniform_along_the_dipole_axis(state: WorldState) -> None:
@@ -158,13 +143,13 @@ def test_external_field_is_uniform_along_the_dipole_axis(state: WorldState) -> N
     )
     assert itrs_to_gcrs is not None
     lat = np.degrees(np.arcsin(dipole_axis_itrs()[2]))
-    assert 80.0 < lat < 81.5  # geomagnetic north pole, IGRF-14 2025
+    assert 80.0 < lat < 81.5  # geomagnetic north pole, IGRF-14 2020 (orbitcal.geomag)
 
 
 def test_crustal_field_has_the_known_size(state: WorldState) -> None:
     db, _ = _inject(state, "crustal_field", model="MF7")
     # NOTES: crust at 450 km is 2.5–3.5 nT rms, up to ~18 nT
-    assert 1.5 < _rms(db) < 6.0 and np.linalg.norm(db, axis=1).max() < 30.0
+    assert 1.5 < norm_rms_nt(db) < 6.0 and np.linalg.norm(db, axis=1).max() < 30.0
 
 
 def test_sun_driven_is_zero_in_eclipse_and_follows_the_sun_in_body(state: WorldState) -> None:
@@ -180,13 +165,13 @@ def test_sun_driven_is_zero_in_eclipse_and_follows_the_sun_in_body(state: WorldS
 def test_nonlinearity_is_cubic(state: WorldState) -> None:
     db, _ = _inject(state, "nonlinearity")
     np.testing.assert_allclose(db, np.array([1e-12, -0.8e-12, 1.2e-12]) * state.b_ref_body_nt**3)
-    assert 10.0 < _rms(db) < 200.0
+    assert 10.0 < norm_rms_nt(db) < 200.0
 
 
 def test_orbit_error_along_track(state: WorldState, tle_text: str) -> None:
     db, info = _inject(state, "orbit_error", along_track_km=2.0)
     assert info["along_track_km_mean"] == pytest.approx(2.0, abs=0.02)
-    assert 5.0 < _rms(db) < 60.0
+    assert 5.0 < norm_rms_nt(db) < 60.0
     # the true orbit from a later real TLE of the same spacecraft
     later = select_tle(tle_text, norad_id=SWARM_A, at_utc_s=START_UTC_S + 20 * 86400)
     assert later.epoch_utc_s > state.tle.epoch_utc_s + 3 * 86400
@@ -222,7 +207,7 @@ def test_attitude_error_leaves_the_scalar_field_clean(state: WorldState) -> None
         np.linalg.norm(b + db, axis=1), np.linalg.norm(b, axis=1), rtol=1e-12
     )
     assert 0.02 < info["angle_deg_rms"] < 0.1
-    assert 10.0 < _rms(db) < 80.0  # 0.05° × 40 000 nT ≈ 35 nT
+    assert 10.0 < norm_rms_nt(db) < 80.0  # 0.05° × 40 000 nT ≈ 35 nT
 
 
 def test_effect_specs_and_errors() -> None:
@@ -318,7 +303,7 @@ def test_scaled_effects_scale_their_disturbance(state: WorldState, name: str) ->
     base = make_effect(name)
     db1 = base.inject(state, np.random.default_rng(1)).db_body_nt
     db3 = base.scaled(3.0).inject(state, np.random.default_rng(1)).db_body_nt
-    ratio = _rms(db3) / _rms(db1)
+    ratio = norm_rms_nt(db3) / norm_rms_nt(db1)
     # linear effects scale exactly; time_offset, orbit_error, attitude_error to first order
     assert ratio == pytest.approx(3.0, rel=0.01), name
 
@@ -326,7 +311,7 @@ def test_scaled_effects_scale_their_disturbance(state: WorldState, name: str) ->
 def test_external_field_driven_by_the_rc_index(state: WorldState) -> None:
     db, _ = _inject(state, "external_field", model="RC")
     # NOTES: quiet-time external field ~10–20 nT at LEO
-    assert 3.0 < _rms(db) < 100.0
+    assert 3.0 < norm_rms_nt(db) < 100.0
 
 
 def test_orbit_error_true_tle_picks_its_spacecraft_from_a_file(
@@ -433,4 +418,4 @@ def test_time_offset_under_tumbling_includes_the_body_rotation(tle_text: str) ->
     np.testing.assert_allclose(
         db[inner], -0.1 * rate_nt_s[inner], atol=0.03 * np.abs(0.1 * rate_nt_s).max()
     )
-    assert _rms(db) > 50.0
+    assert norm_rms_nt(db) > 50.0

@@ -33,8 +33,8 @@ from datetime import UTC, datetime
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
+from orbitcal.arrays import FloatArray
 from orbitcal.errors import BadInputError
 
 __all__ = [
@@ -48,7 +48,6 @@ __all__ = [
     "parse_rc_index_h5",
 ]
 
-FloatArray = npt.NDArray[np.float64]
 
 _NTP_UNIX_OFFSET_S = 2_208_988_800.0  # 1900-01-01 → 1970-01-01
 _MJD_UNIX_EPOCH = 40_587.0  # MJD of 1970-01-01

@@ -17,13 +17,11 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from orbitcal.arrays import BoolArray, FloatArray
 from orbitcal.auxdata.formats import ParsedTable
 from orbitcal.auxdata.tables import active_table
 
 __all__ = ["StormMask", "quiet_selection", "storm_mask"]
-
-BoolArray = npt.NDArray[np.bool_]
-FloatArray = npt.NDArray[np.float64]
 
 
 def _iso(t: float) -> str:

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from orbitcal.arrays import FloatArray
 from orbitcal.calibrate.errors import DocumentError
 
 __all__ = [
@@ -23,8 +24,6 @@ __all__ = [
     "as_hk",
     "best_linear_approximation",
 ]
-
-FloatArray = NDArray[np.float64]
 
 
 def as_hk(x_hk: FloatArray | None, n: int) -> FloatArray:

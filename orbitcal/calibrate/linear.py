@@ -14,8 +14,8 @@ Cramér–Rao bound, :func:`cramer_rao_bound`). The calibration inverts it:
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import NDArray
 
+from orbitcal.arrays import FloatArray
 from orbitcal.calibrate.base import AffineCalibration, FitData
 from orbitcal.calibrate.errors import (
     MissingAttitudeError,
@@ -32,7 +32,6 @@ __all__ = [
     "fit_linear_batch",
 ]
 
-FloatArray = NDArray[np.float64]
 
 # Largest accepted condition number of the column-equilibrated design matrix. Beyond it one
 # direction of the parameter space is determined by < 1e-6 of the data's leverage.

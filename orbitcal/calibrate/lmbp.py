@@ -27,8 +27,8 @@ from typing import Any, Literal
 
 import numpy as np
 import torch
-from numpy.typing import NDArray
 
+from orbitcal.arrays import FloatArray
 from orbitcal.calibrate.base import Calibration, FitData, best_linear_approximation
 from orbitcal.calibrate.errors import (
     DocumentError,
@@ -49,7 +49,6 @@ __all__ = [
     "fit_lmbp",
 ]
 
-FloatArray = NDArray[np.float64]
 Activation = Literal["tanh", "sigmoid"]
 
 #: The calibrator's stopping rule. The fit stops when the last 5 epochs together lowered the

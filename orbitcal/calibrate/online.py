@@ -26,8 +26,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from numpy.typing import NDArray
 
+from orbitcal.arrays import FloatArray
 from orbitcal.calibrate.base import AffineCalibration, Calibration, FitData
 from orbitcal.calibrate.errors import PoorCoverageError, TooFewSamplesError
 from orbitcal.calibrate.linear import CONDITION_LIMIT
@@ -40,8 +40,6 @@ __all__ = [
     "eta_to_calibration",
     "fit_online",
 ]
-
-FloatArray = NDArray[np.float64]
 
 
 def ellipsoid_features(m_nt: FloatArray, *, scale_nt: float) -> FloatArray:

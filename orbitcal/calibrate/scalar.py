@@ -28,8 +28,8 @@ from __future__ import annotations
 
 import numpy as np
 import torch
-from numpy.typing import NDArray
 
+from orbitcal.arrays import FloatArray
 from orbitcal.calibrate.base import AffineCalibration, FitData
 from orbitcal.calibrate.errors import PoorCoverageError, TooFewSamplesError
 from orbitcal.calibrate.linear import CONDITION_LIMIT, equilibrated_condition_number
@@ -41,7 +41,6 @@ __all__ = [
     "scalar_residual_nt",
 ]
 
-FloatArray = NDArray[np.float64]
 
 _SYM = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 

@@ -14,8 +14,8 @@ import warnings
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import numpy.typing as npt
 
+from orbitcal.arrays import FloatArray
 from orbitcal.diagnose.attribution import Attribution, attribute
 from orbitcal.diagnose.effects import DiagnosisData
 from orbitcal.diagnose.prior import CalibrationPrior
@@ -36,7 +36,6 @@ __all__ = [
     "rotation_itrs_to_body",
 ]
 
-FloatArray = npt.NDArray[np.float64]
 
 #: Crustal model used as the crustal_field candidate (Olsen et al. 2017).
 DEFAULT_CRUST_MODEL = "LCS-1"

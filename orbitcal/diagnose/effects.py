@@ -15,9 +15,8 @@ the parameters by the (small) calibration error only.
 Each effect declares its *witness*: the data it needs (a temperature channel, magnetorquer commands,
 the Sun direction, a crustal model ...). An effect whose witness is missing is not a candidate.
 
-Geometry helpers use a centred dipole whose north geomagnetic pole is fixed at 80.65 N, 72.68 W
-(IGRF-14 at 2020.0, Alken et al. 2021 table 2 pole position rounded; the pole moves by < 0.3 deg
-over 2015-2025, far below what the magnetic-latitude bands and the ring-current axis need).
+Geometry helpers use the centred dipole of :mod:`orbitcal.geomag` (IGRF-14 at 2020.0), the same
+one the simulator uses.
 """
 
 from __future__ import annotations
@@ -32,26 +31,19 @@ import numpy as np
 import numpy.typing as npt
 
 from orbitcal.diagnose.prior import CalibrationPrior
+from orbitcal.geomag import dipole_axis_itrs, magnetic_latitude_deg
 
 __all__ = [
     "CATALOGUE",
-    "DIPOLE_POLE_LAT_DEG",
-    "DIPOLE_POLE_LON_DEG",
     "EFFECT_NAMES",
     "DesignBlock",
     "DiagnosisData",
     "Effect",
-    "dipole_axis_itrs",
     "get_effect",
-    "magnetic_latitude_deg",
 ]
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
-
-#: Geographic latitude and longitude of the north geomagnetic (dipole) pole [deg], IGRF-14 2020.0.
-DIPOLE_POLE_LAT_DEG = 80.65
-DIPOLE_POLE_LON_DEG = -72.68
 
 #: Earth rotation rate about the ITRS z axis [rad/s] (IERS nominal).
 EARTH_ROTATION_RAD_S = 7.292115e-5
@@ -75,25 +67,6 @@ EFFECT_NAMES: tuple[str, ...] = (
 )
 
 SECONDS_PER_DAY = 86400.0
-
-
-def dipole_axis_itrs() -> FloatArray:
-    """Unit vector of the geomagnetic dipole axis (towards the north geomagnetic pole), ITRS.
-
-    Returns
-    -------
-    ndarray, shape (3,)
-        ITRS x, y, z components [-].
-    """
-    lat = np.radians(DIPOLE_POLE_LAT_DEG)
-    lon = np.radians(DIPOLE_POLE_LON_DEG)
-    return np.array([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)])
-
-
-def magnetic_latitude_deg(r_itrs_km: FloatArray) -> FloatArray:
-    """Centred-dipole magnetic latitude [deg] of ITRS positions ``(..., 3)`` [km]."""
-    r_hat = r_itrs_km / np.linalg.norm(r_itrs_km, axis=-1, keepdims=True)
-    return np.degrees(np.arcsin(np.clip(r_hat @ dipole_axis_itrs(), -1.0, 1.0)))
 
 
 def _segments(t_s: FloatArray) -> list[slice]:

@@ -55,12 +55,14 @@ from numpy.polynomial import legendre
 from scipy import linalg
 from scipy.optimize import least_squares
 
+from orbitcal.arrays import BoolArray, FloatArray
 from orbitcal.diagnose.effects import DiagnosisData
 from orbitcal.field.synthesis import (
     EARTH_REFERENCE_RADIUS_KM,
     synth_internal_nec_nt,
     to_degree_blocks,
 )
+from orbitcal.metrics import norm_rms_nt
 
 __all__ = [
     "LEGENDRE_ORDER",
@@ -72,8 +74,6 @@ __all__ = [
     "sh_design_nec",
 ]
 
-FloatArray = npt.NDArray[np.float64]
-BoolArray = npt.NDArray[np.bool_]
 
 #: Truncation order of the regional Legendre model (CN109855623A: N_off = 3).
 LEGENDRE_ORDER = 3
@@ -381,10 +381,6 @@ def _fit_net(
 # ---- the model ---------------------------------------------------------------------------------
 
 
-def _rms(v: FloatArray) -> float:
-    return float(np.sqrt(np.mean(np.sum(v**2, axis=1)))) if v.size else float("nan")
-
-
 def _training_folds(t: FloatArray, train: BoolArray) -> tuple[npt.NDArray[np.intp], int]:
     """Equal-duration folds of the training span (-1 outside training); empty folds dropped."""
     fold = np.full(t.shape[0], -1, dtype=np.intp)
@@ -542,8 +538,8 @@ def learned_field_model(
     pad = 0.02 * (hi_in - lo_in)
     inside = np.all((x >= lo_in - pad) & (x <= hi_in + pad), axis=1) & inside_box
     net[~inside] = 0.0
-    val_without = _rms(rest[valid])
-    val_with = _rms((rest - net)[valid])
+    val_without = norm_rms_nt(rest[valid])
+    val_with = norm_rms_nt((rest - net)[valid])
     net_used = bool(val_with < (1.0 - NET_MIN_GAIN) * val_without)
     after_nec = stage_pred + (net if net_used else 0.0)
 
@@ -552,9 +548,9 @@ def learned_field_model(
         return np.einsum("nij,nj->ni", data.rot_itrs_to_body, v_itrs)
 
     def held(v_nec: FloatArray) -> float:
-        return _rms((residual_body_nt - body(v_nec))[holdout])
+        return norm_rms_nt((residual_body_nt - body(v_nec))[holdout])
 
-    before = _rms(residual_body_nt[holdout])
+    before = norm_rms_nt(residual_body_nt[holdout])
     after = held(after_nec)
     deg = int(sh["degree"])
     summary = {

@@ -20,7 +20,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
+
+from orbitcal.arrays import FloatArray
 
 __all__ = [
     "DEFAULT_SIGMA_MATRIX",
@@ -29,7 +30,6 @@ __all__ = [
     "prior_from_document",
 ]
 
-FloatArray = npt.NDArray[np.float64]
 
 #: Default prior standard deviation of each element of ``A`` [-] (30 ppm).
 DEFAULT_SIGMA_MATRIX = 3.0e-5

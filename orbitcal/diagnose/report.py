@@ -19,14 +19,12 @@ import math
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
 from orbitcal.diagnose.attribution import Attribution
 from orbitcal.diagnose.effects import EFFECT_NAMES, DiagnosisData, get_effect
 
 __all__ = ["BASELINE_METHOD", "build_report", "report_html"]
 
-FloatArray = npt.NDArray[np.float64]
 
 #: Name of the baseline calibration in the report.
 BASELINE_METHOD = "linear-12"

@@ -7,7 +7,7 @@ the held-out blocks as in CONTRACT section 5.
 
 * *scalar* residual: the component along the reference field, what an attitude-free (|B|) check
   sees; *perpendicular*: the rest, where attitude errors and field-aligned currents live.
-* magnetic latitude: centred dipole (:func:`orbitcal.diagnose.effects.magnetic_latitude_deg`).
+* magnetic latitude: centred dipole (:func:`orbitcal.geomag.magnetic_latitude_deg`, IGRF-14 2025.0).
 * local time: mean solar local time from longitude and UTC [h].
 * orbit phase: argument-of-latitude-like phase from the track [deg].
 """
@@ -17,14 +17,13 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
+from orbitcal.arrays import BoolArray, FloatArray
 from orbitcal.diagnose.effects import DiagnosisData
+from orbitcal.metrics import norm_rms_nt, rms_nt
 
 __all__ = ["MLAT_BANDS_DEG", "local_time_h", "where_analysis"]
 
-FloatArray = npt.NDArray[np.float64]
-BoolArray = npt.NDArray[np.bool_]
 
 #: |magnetic latitude| bands [deg].
 MLAT_BANDS_DEG: tuple[tuple[float, float], ...] = (
@@ -42,14 +41,6 @@ def local_time_h(t_utc_s: FloatArray, r_itrs_km: FloatArray) -> FloatArray:
     return np.asarray(np.mod((t_utc_s % 86400.0) / 3600.0 + lon_deg / 15.0, 24.0))
 
 
-def _rms(x: FloatArray) -> float:
-    return float(np.sqrt(np.mean(np.sum(x**2, axis=-1)))) if x.size else float("nan")
-
-
-def _rms1(x: FloatArray) -> float:
-    return float(np.sqrt(np.mean(x**2))) if x.size else float("nan")
-
-
 def _split(r: FloatArray, b_hat: FloatArray) -> tuple[FloatArray, FloatArray]:
     par = np.sum(r * b_hat, axis=1)
     perp = r - par[:, None] * b_hat
@@ -60,9 +51,9 @@ def _stats(r: FloatArray, b_hat: FloatArray, mask: BoolArray) -> dict[str, float
     par, perp = _split(r[mask], b_hat[mask])
     return {
         "n": int(mask.sum()),
-        "rms_nt": round(_rms(r[mask]), 3),
-        "scalar_rms_nt": round(_rms1(par), 3),
-        "perpendicular_rms_nt": round(_rms(perp), 3),
+        "rms_nt": round(norm_rms_nt(r[mask]), 3),
+        "scalar_rms_nt": round(rms_nt(par), 3),
+        "perpendicular_rms_nt": round(norm_rms_nt(perp), 3),
     }
 
 
@@ -131,11 +122,11 @@ def where_analysis(
     par_h, perp_h = _split(r[h], b_hat[h])
     out: dict[str, Any] = {
         "residual": "12-parameter calibration fitted on the training blocks",
-        "axis_rms_nt": [round(_rms1(r[h, k]), 3) for k in range(3)],
-        "rms_nt": round(_rms1(r[h]), 3),
-        "norm_rms_nt": round(_rms(r[h]), 3),
-        "scalar_rms_nt": round(_rms1(par_h), 3),
-        "perpendicular_rms_nt": round(_rms(perp_h), 3),
+        "axis_rms_nt": [round(rms_nt(r[h, k]), 3) for k in range(3)],
+        "rms_nt": round(rms_nt(r[h]), 3),
+        "norm_rms_nt": round(norm_rms_nt(r[h]), 3),
+        "scalar_rms_nt": round(rms_nt(par_h), 3),
+        "perpendicular_rms_nt": round(norm_rms_nt(perp_h), 3),
     }
     out["scalar_to_vector"] = round(out["scalar_rms_nt"] / max(out["norm_rms_nt"], 1e-12), 4)
 
@@ -186,7 +177,7 @@ def where_analysis(
     out["frequency"] = _dominant_periods(t, r)
 
     # Where is the excess? The band/condition whose mean square most exceeds the overall one.
-    overall = _rms(r) ** 2
+    overall = norm_rms_nt(r) ** 2
     candidates: list[tuple[float, str]] = []
     for bnd in bands:
         n_b = float(bnd["n"])

@@ -9,6 +9,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
+from orbitcal.arrays import FloatArray
 from orbitcal.errors import OutOfRangeError
 from orbitcal.field._kernel import HAVE_NUMBA, synth_pp_nec_nt
 from orbitcal.field.synthesis import n_block_coeffs, synth_internal_nec_nt, to_degree_blocks
@@ -22,7 +23,6 @@ __all__ = [
     "utc_s_to_mjd2000",
 ]
 
-FloatArray = NDArray[np.float64]
 
 #: POSIX seconds at 2000-01-01T00:00:00 UTC, the origin of "MJD2000" as used by ChaosMagPy
 #: (``chaosmagpy.data_utils.mjd2000``: days since 2000-01-01 00:00 UTC, no leap seconds).

@@ -16,10 +16,10 @@ one shipped with ChaosMagPy, ``chaosmagpy/lib/RC_index.h5``), linearly interpola
 does; the model is valid over the index file's time span.
 
 Frames: SM has z along the northern dipole pole (the centred dipole of ChaosMagPy's
-``params.dipole``) and the Sun in its x–z plane; GSM has x towards the Sun and the dipole in its
-x–z plane. The Sun's direction comes from the Astronomical Almanac's low-precision formula
-(0.01°), rotated to ITRS by Greenwich mean sidereal time — far below the nT level for a field of
-≈ 100 nT.
+``params.dipole``, IGRF-12 at 2015.0: :data:`CHAOS_SM_DIPOLE_NT`) and the Sun in its x–z plane;
+GSM has x towards the Sun and the dipole in its x–z plane. The Sun's direction comes from the
+Astronomical Almanac's low-precision formula (0.01°), rotated to ITRS by Greenwich mean sidereal
+time — far below the nT level for a field of ≈ 100 nT.
 """
 
 from __future__ import annotations
@@ -29,8 +29,8 @@ from importlib import resources
 from pathlib import Path
 
 import numpy as np
-from numpy.typing import NDArray
 
+from orbitcal.arrays import FloatArray
 from orbitcal.field._base import (
     FieldRangeError,
     _broadcast_samples,
@@ -42,7 +42,7 @@ from orbitcal.field.synthesis import synth_internal_nec_nt
 __all__ = [
     "CHAOS7_Q_GSM_NT",
     "CHAOS7_Q_SM",
-    "DIPOLE_GAUSS_NT",
+    "CHAOS_SM_DIPOLE_NT",
     "RingCurrentField",
     "rc_index_path",
     "ring_current_field",
@@ -50,7 +50,6 @@ __all__ = [
     "sun_direction_itrs",
 ]
 
-FloatArray = NDArray[np.float64]
 
 #: CHAOS-7 SM degree-1 response to the RC index (q10, q11, s11) [nT per nT of RC]:
 #: ``coeffs_sm[:3]`` of CHAOS-7.mat (ChaosMagPy ``load_CHAOS_matfile``, ancklo/ChaosMagPy
@@ -60,9 +59,11 @@ CHAOS7_Q_SM = (-0.93931258, -0.00407992, -0.00794409)
 #: CHAOS-7 static GSM external q10 [nT] (``coeffs_gsm[0]`` of the same file).
 CHAOS7_Q_GSM_NT = 12.42987286
 
-#: Centred dipole (g10, g11, h11) [nT] that defines the SM/GSM z axis: ChaosMagPy 0.16
-#: ``basicConfig['params.dipole']`` (IGRF-12 at 2015.0), used by CHAOS for these frames.
-DIPOLE_GAUSS_NT = (-29442.0, -1501.0, 4797.1)
+#: Centred dipole (g10, g11, h11) [nT] that defines the SM/GSM z axis of the CHAOS external field:
+#: IGRF-12 at epoch 2015.0, as ChaosMagPy 0.16 ``basicConfig['params.dipole']`` gives it. Part of
+#: the CHAOS parameterisation (its q/s coefficients are fitted in these frames), so it stays at
+#: 2015.0; the geomagnetic coordinates of the simulator and diagnosis are :mod:`orbitcal.geomag`.
+CHAOS_SM_DIPOLE_NT: tuple[float, float, float] = (-29442.0, -1501.0, 4797.1)
 
 _JD_UNIX_EPOCH = 2440587.5  # Julian date of 1970-01-01T00:00 UTC
 
@@ -98,7 +99,7 @@ def sun_direction_itrs(t_utc_s: FloatArray) -> FloatArray:
 
 def sm_gsm_axes_itrs(t_utc_s: FloatArray) -> tuple[FloatArray, FloatArray]:
     """SM and GSM unit axes in ITRS: two arrays (N, 3, 3), rows = x, y, z axes."""
-    g10, g11, h11 = DIPOLE_GAUSS_NT
+    g10, g11, h11 = CHAOS_SM_DIPOLE_NT
     z_sm = -np.array([g11, h11, g10]) / np.linalg.norm([g11, h11, g10])
     sun = sun_direction_itrs(t_utc_s)
     y_sm = np.cross(z_sm, sun)

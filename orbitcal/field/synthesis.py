@@ -24,6 +24,8 @@ from functools import lru_cache
 import numpy as np
 from numpy.typing import NDArray
 
+from orbitcal.arrays import FloatArray
+
 __all__ = [
     "CHUNK_SIZE",
     "EARTH_REFERENCE_RADIUS_KM",
@@ -45,7 +47,6 @@ CHUNK_SIZE = 2048
 #: far less than 1e-6 nT; it avoids 0/0 in B_φ).
 _POLE_EPS_RAD = 1e-9
 
-FloatArray = NDArray[np.float64]
 #: Per-chunk coefficient provider: (start, stop) sample indices -> (K, stop - start) degree blocks
 #: (transposed: orders along axis 0, points along axis 1).
 CoeffProvider = Callable[[int, int], FloatArray]

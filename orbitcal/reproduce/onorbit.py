@@ -16,8 +16,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from numpy.typing import NDArray
 
+from orbitcal.arrays import FloatArray
 from orbitcal.telemetry import Telemetry
 
 __all__ = [
@@ -28,7 +28,6 @@ __all__ = [
     "write_tle",
 ]
 
-FloatArray = NDArray[np.float64]
 
 # Swarm A (NORAD 39452), CelesTrak element set of 2023-11-19, copied verbatim from
 # tests/authorities/swarm_iss_real_tles.tle (provenance in tests/authorities/README.md). An eclipse

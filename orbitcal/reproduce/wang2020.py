@@ -35,8 +35,8 @@ from typing import Any
 
 import numpy as np
 import torch
-from numpy.typing import NDArray
 
+from orbitcal.arrays import FloatArray
 from orbitcal.calibrate.base import Calibration, FitData
 from orbitcal.calibrate.lm import LMOptions
 from orbitcal.calibrate.lmbp import LMBPCalibration, fit_lmbp
@@ -57,7 +57,6 @@ __all__ = [
     "true_field_nt",
 ]
 
-FloatArray = NDArray[np.float64]
 
 # Eq. 15: ground drift [nT] and coefficient matrix.
 B0_GROUND_NT = np.array([-633.2, 1281.7, -455.5])

@@ -17,9 +17,9 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
-import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
+from orbitcal.arrays import FloatArray
 from orbitcal.attitude import matrix_to_quat_wxyz, quat_normalize, wxyz_to_xyzw, xyzw_to_wxyz
 
 __all__ = [
@@ -30,8 +30,6 @@ __all__ = [
     "Tumbling",
     "attitude_profile",
 ]
-
-FloatArray = npt.NDArray[np.float64]
 
 
 class AttitudeProfile(Protocol):

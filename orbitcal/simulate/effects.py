@@ -35,7 +35,9 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 import numpy as np
-import numpy.typing as npt
+
+from orbitcal.arrays import FloatArray
+from orbitcal.geomag import dipole_axis_itrs, magnetic_latitude_deg
 
 if TYPE_CHECKING:  # pragma: no cover
     from orbitcal.simulate.state import WorldState
@@ -43,7 +45,6 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = [
     "EFFECTS",
     "EFFECT_NAMES",
-    "IGRF14_DIPOLE_2025_NT",
     "AttitudeErrorEffect",
     "CrustalFieldEffect",
     "Effect",
@@ -57,32 +58,9 @@ __all__ = [
     "SunDrivenEffect",
     "TemperatureEffect",
     "TimeOffsetEffect",
-    "dipole_axis_itrs",
-    "magnetic_latitude_deg",
     "make_effect",
     "parse_effect_spec",
 ]
-
-FloatArray = npt.NDArray[np.float64]
-
-#: IGRF-14 dipole coefficients g10, g11, h11 at 2025.0 [nT] (IAGA V-MOD, IGRF-14, 2024).
-IGRF14_DIPOLE_2025_NT: tuple[float, float, float] = (-29350.0, -1410.3, 4545.5)
-
-
-def dipole_axis_itrs() -> FloatArray:
-    """Unit vector to the geomagnetic north pole (centred dipole, IGRF-14 2025), ITRS.
-
-    ``-(g11, h11, g10) / |…|``: latitude 80.8° N, longitude 72.8° W.
-    """
-    g10, g11, h11 = IGRF14_DIPOLE_2025_NT
-    v = -np.array([g11, h11, g10])
-    return v / np.linalg.norm(v)
-
-
-def magnetic_latitude_deg(r_itrs_km: FloatArray) -> FloatArray:
-    """Centred-dipole magnetic latitude [deg] of ITRS positions, shape (N,)."""
-    r_hat = r_itrs_km / np.linalg.norm(r_itrs_km, axis=-1, keepdims=True)
-    return np.rad2deg(np.arcsin(np.clip(r_hat @ dipole_axis_itrs(), -1.0, 1.0)))
 
 
 class Injection(NamedTuple):

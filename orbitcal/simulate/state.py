@@ -14,6 +14,7 @@ import numpy as np
 import numpy.typing as npt
 
 from orbitcal import frames
+from orbitcal.arrays import FloatArray
 from orbitcal.attitude import frame_to_body
 from orbitcal.orbit import Orbit
 from orbitcal.simulate.attitude_profiles import AttitudeProfile
@@ -27,8 +28,6 @@ __all__ = [
     "kinematics",
     "orbital_thermal_cycle_c",
 ]
-
-FloatArray = npt.NDArray[np.float64]
 
 
 # --- kinematics ----------------------------------------------------------------------------------

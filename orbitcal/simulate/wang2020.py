@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from orbitcal.arrays import FloatArray
 from orbitcal.sensor import WANG2020_NOISE_STD_NT, SensorModel
 
 __all__ = [
@@ -27,7 +28,6 @@ __all__ = [
     "wang2020_truth_nt",
 ]
 
-FloatArray = npt.NDArray[np.float64]
 
 #: Wang 2020 section 5: the sensor parameters change at t = 15 s (eq. 17).
 WANG2020_CHANGE_T_S = 15.0

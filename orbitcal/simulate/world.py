@@ -35,6 +35,8 @@ import numpy.typing as npt
 import pandas as pd
 
 from orbitcal import frames
+from orbitcal.arrays import FloatArray
+from orbitcal.metrics import norm_rms_nt
 from orbitcal.orbit import Orbit, read_tle_sets, select_orbit
 from orbitcal.sensor import SensorModel
 from orbitcal.simulate.attitude_profiles import AttitudeProfile, NadirLVLH, Tumbling
@@ -67,7 +69,6 @@ __all__ = [
     "simulate_world",
 ]
 
-FloatArray = npt.NDArray[np.float64]
 _UNIX_EPOCH_JD = 2_440_587.5
 
 
@@ -111,10 +112,6 @@ def _jsonable(x: Any) -> Any:
     if isinstance(x, list | tuple):
         return [_jsonable(v) for v in x]
     return x
-
-
-def _rms(x: FloatArray) -> float:
-    return float(np.sqrt(np.mean(np.sum(x**2, axis=-1)))) if x.size else 0.0
 
 
 @dataclass
@@ -334,7 +331,7 @@ def simulate_world(
             {
                 "name": effect.name,
                 "params": _jsonable(effect.params),
-                "rms_nt": _rms(injected[key]),
+                "rms_nt": norm_rms_nt(injected[key]),
                 "axis_rms_nt": np.sqrt(np.mean(injected[key] ** 2, axis=0)).tolist(),
                 "max_nt": float(np.max(np.linalg.norm(injected[key], axis=1))) if n else 0.0,
                 **({"info": _jsonable(inj.info)} if inj.info else {}),
@@ -393,7 +390,7 @@ def simulate_world(
         else ("none" if not effect_truth else "multiple"),
         "housekeeping": _jsonable(housekeeping.__dict__),
         "eclipse_fraction": float(np.mean(state.illumination < 0.5)) if n else 0.0,
-        "b_ref_rms_nt": _rms(state.b_ref_body_nt),
+        "b_ref_rms_nt": norm_rms_nt(state.b_ref_body_nt),
         "seed": seed,
     }
     return World(
@@ -495,7 +492,7 @@ def simulate_measured_field(
             {
                 "name": "measured_minus_reference",
                 "params": {},
-                "rms_nt": _rms(gap),
+                "rms_nt": norm_rms_nt(gap),
                 "axis_rms_nt": np.sqrt(np.mean(gap**2, axis=0)).tolist(),
                 "max_nt": float(np.max(np.linalg.norm(gap, axis=1))),
             }
@@ -503,7 +500,7 @@ def simulate_measured_field(
         "verdict": "measured",
         "housekeeping": _jsonable(housekeeping.__dict__),
         "eclipse_fraction": float(np.mean(state.illumination < 0.5)),
-        "b_ref_rms_nt": _rms(state.b_ref_body_nt),
+        "b_ref_rms_nt": norm_rms_nt(state.b_ref_body_nt),
         "seed": seed,
     }
     return World(
