@@ -5,13 +5,20 @@ Every candidate of the catalogue (:mod:`orbitcal.diagnose.effects`) is fitted *j
 how much it shrinks the residual on the later, held-out blocks that no fit saw (``docs/design.md``:
 held-out data are always later time blocks, never random rows).
 
-Greedy forward selection adds, one at a time, the candidate with the lowest held-out RMS among those
-that beat the current model *significantly*: the held-out span (or, for a localised effect, the
-part where it acts) is cut into consecutive chunks, the per-chunk log ratio of the mean squared
-residual is tested with a one-sided Wilcoxon signed-rank test (Bonferroni over the candidates of
-the step), and the RMS must shrink by at least ``min_gain``. When nothing passes, no
-effect is named (verdict ``"none"``). The selected set is then scored drop-one (each effect's unique
-contribution).
+Stepwise selection (:class:`Selection`, :func:`attribute`). A *forward step* adds the candidate
+with the lowest held-out RMS among those that beat the current model *significantly*: the held-out
+span (or, for a localised effect, the part where it acts) is cut into consecutive chunks, the
+per-chunk log ratio of the mean squared residual is tested with a one-sided Wilcoxon signed-rank
+test (Bonferroni over the candidates of the step), and the RMS -- or the geometric mean of the
+per-chunk RMS -- must shrink by at least ``min_gain``. Candidates the held-out chunks cannot tell
+from the best are tied and the training BIC names one (the others within 10 of its BIC are listed
+as indistinguishable from it). When no single candidate passes, a *pair* that passes together
+(each significant on top of the other) may be added. A *swap* pass then chooses every selected
+effect again given all the others, and a *backward* step re-tests each conditional on all the
+others and drops the weakest that fails; forward steps resume without it. A candidate whose fit
+leaves its physical range at one step (``implausible``) is tried again at the next. When nothing
+passes, no effect is named (verdict ``"none"``). The selected set is then scored step by step
+(joint refits) and drop-one (each effect's unique contribution).
 
 Split-fit tests expose effects the 12 parameters absorb so that the residual alone hides them:
 the calibration is fitted separately on sunlit and eclipse samples, on attitude regimes and on
@@ -24,6 +31,7 @@ calibration of the rest of the orbit.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -629,6 +637,9 @@ class Attribution:
         Candidates reported ``implausible``, with the reason.
     has_prior : bool
         Whether a calibration prior held the 12 parameters.
+    dropped : list of str
+        Effects a forward step selected and the backward step removed again (each re-tested
+        conditional on all the others no longer shrank the held-out residual significantly).
     span_s : float
         Time span of the data [s].
     """
@@ -649,6 +660,7 @@ class Attribution:
     implausible: dict[str, str] = field(default_factory=dict)
     has_prior: bool = False
     span_s: float = 0.0
+    dropped: list[str] = field(default_factory=list)
 
 
 def _chunk_test(r_before: FloatArray, r_after: FloatArray, n_chunks: int) -> tuple[float, float]:
@@ -675,20 +687,37 @@ def _chunk_test(r_before: FloatArray, r_after: FloatArray, n_chunks: int) -> tup
     return float(res.pvalue), mean
 
 
+#: Fewest chunks (of >= 3 samples) a localised effect's support is tested on.
+MIN_LOCAL_CHUNKS = 8
+
+
 def _support(
-    fit: JointFit, train: BoolArray, holdout: BoolArray, n_chunks: int, n_chunks_local: int
+    fit: JointFit,
+    train: BoolArray,
+    holdout: BoolArray,
+    n_chunks: int,
+    n_chunks_local: int,
+    *,
+    k: int = -1,
 ) -> tuple[BoolArray, int]:
     """Held-out samples where the candidate's fitted field matters (> 10 % of its training peak).
 
-    Localised effects (field-aligned currents, a patchy crust) are tested where they act; the
+    Block ``k`` of the fit (default the last). Localised effects (field-aligned currents, a
+    patchy crust) are tested where they act; the
     support depends on positions and the training fit only, never on held-out residuals. Returns
     the support and the number of chunks to cut it into (``n_chunks_local`` when it covers less
     than half of the held-out samples).
     """
-    mag = np.linalg.norm(fit.effect_nt(len(fit.blocks) - 1), axis=1)
+    mag = np.linalg.norm(fit.effect_nt(k % len(fit.blocks)), axis=1)
     peak = float(np.percentile(mag[train], 99)) if np.any(train) else 0.0
     sup = holdout & (mag > 0.1 * peak)
-    if int(sup.sum()) < 3 * n_chunks_local:
+    n_sup = int(sup.sum())
+    if n_sup < 3 * n_chunks_local:
+        # A support too small for n_chunks_local chunks of 3 samples is still tested where the
+        # effect acts when it holds 8 such chunks (diluted over the whole held-out span, a
+        # field confined to one crossing would pass or fail by a sample or two).
+        if n_sup >= 3 * MIN_LOCAL_CHUNKS:
+            return sup, n_sup // 3
         return holdout, n_chunks
     if int(sup.sum()) > 0.5 * int(holdout.sum()):
         return sup, n_chunks
@@ -703,6 +732,297 @@ def _params(fit: JointFit, k: int) -> dict[str, Any]:
     if bl.variant:
         out["variant"] = bl.variant
     return out
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One candidate fitted jointly with the calibration and the effects already selected.
+
+    Attributes
+    ----------
+    name : str
+        Catalogue name.
+    fit : JointFit
+        The joint fit; the candidate's block is the last one.
+    residual_nt : ndarray, shape (N, 3)
+        Residual of that fit at every sample [nT].
+    holdout_rms_nt : float
+        Held-out vector RMS of the residual [nT].
+    p_value : float
+        Held-out chunk test against the model without the candidate (1 when not tested).
+    gains : bool
+        Whether it shrinks the held-out residual by the minimum gain (:meth:`Selection.judge`).
+    """
+
+    name: str
+    fit: JointFit
+    residual_nt: FloatArray
+    holdout_rms_nt: float
+    p_value: float = 1.0
+    gains: bool = False
+
+    def passes(self, level: float) -> bool:
+        """Significant at ``level`` and shrinking the held-out residual enough."""
+        return self.p_value < level and self.gains
+
+    @property
+    def block(self) -> DesignBlock:
+        """The candidate's design block (the variant chosen on the training blocks)."""
+        return self.fit.blocks[-1]
+
+
+#: Tied candidates (held-out chunks cannot tell them apart) whose training BIC exceeds the
+#: winner's by less than this are reported as indistinguishable from it: a BIC difference below
+#: 10 (2 ln of the Bayes factor) is not "very strong" evidence (Kass & Raftery 1995).
+NEAR_TWIN_BIC = 10.0
+
+#: Effects whose design is found by a scan of the residual (the attitude error's periods): after
+#: other effects are selected they are designed again on what those leave.
+RESIDUAL_SCANNED: tuple[str, ...] = ("attitude_error",)
+
+#: Candidates whose held-out RMS is within this fraction of the best one and that the held-out
+#: chunk test cannot tell worse than it are tied too (the training BIC decides among them) [-].
+TIE_MAX_GAP = 0.10
+
+
+@dataclass
+class Selection:
+    """The shared state of the selection steps of :func:`attribute` (one data set, one split).
+
+    Every step fits on the training blocks only; the held-out blocks judge.
+    """
+
+    data: DiagnosisData
+    train: BoolArray
+    holdout: BoolArray
+    designs: dict[str, DesignBlock]
+    effects: dict[str, Effect] = field(default_factory=dict)
+    robust: bool = True
+    n_chunks: int = 32
+    n_chunks_local: int = 16
+    alpha: float = 0.05
+    min_gain: float = 0.03
+    tie_tolerance: float = 0.01
+
+    def evaluate(
+        self, fixed: Sequence[DesignBlock], block: DesignBlock, *, bounded: bool = True
+    ) -> tuple[JointFit, FloatArray, float]:
+        """Fit ``block`` (its variant chosen by training BIC) with ``fixed``; residual and RMS."""
+        chosen = _resolve(self.data, self.train, fixed, block, bounded=bounded)
+        return self.fit([*fixed, chosen], bounded=bounded)
+
+    def fit(
+        self, blocks: Sequence[DesignBlock], *, bounded: bool = True
+    ) -> tuple[JointFit, FloatArray, float]:
+        """Joint fit of ``blocks`` as they are; residual at every sample and held-out RMS."""
+        fit = fit_joint(self.data, self.train, blocks, robust=self.robust, bounded=bounded)
+        r = self.data.b_raw_nt - fit.predict_nt(self.data)
+        return fit, r, vector_rms_nt(r[self.holdout])
+
+    def test(self, fit: JointFit, r: FloatArray, r_before: FloatArray, k: int = -1) -> float:
+        """p-value of the held-out chunk test of block ``k`` of ``fit`` (default the last)."""
+        return self.judge(fit, r, r_before, k=k)[0]
+
+    def judge(
+        self,
+        fit: JointFit,
+        r: FloatArray,
+        r_before: FloatArray,
+        rms_after: float | None = None,
+        rms_before: float | None = None,
+        *,
+        k: int = -1,
+    ) -> tuple[float, bool]:
+        """Held-out chunk test of block ``k`` of ``fit``: its p-value and whether it gains enough.
+
+        It gains enough when the held-out RMS shrinks by ``min_gain`` or, on the chunks of its
+        support, the geometric mean of the per-chunk RMS shrinks by as much: beside an effect
+        no model predicts well (auroral currents that change from pass to pass) a real effect
+        shrinks most chunks clearly and the total RMS hardly.
+        """
+        sup, chunks = _support(
+            fit, self.train, self.holdout, self.n_chunks, self.n_chunks_local, k=k
+        )
+        p, mean_log = _chunk_test(r_before[sup], r[sup], chunks)
+        ok = float(np.exp(-0.5 * mean_log)) < 1.0 - self.min_gain
+        if rms_after is not None and rms_before is not None:
+            ok = ok or self.gains(rms_after, rms_before)
+        return p, ok
+
+    def gains(self, rms_after: float, rms_before: float) -> bool:
+        """Whether the held-out RMS shrinks by at least ``min_gain``."""
+        return rms_after < rms_before * (1.0 - self.min_gain)
+
+    def candidate(
+        self,
+        fixed: Sequence[DesignBlock],
+        name: str,
+        r_before: FloatArray,
+        fixed_fit: JointFit | None = None,
+        rms_before: float | None = None,
+    ) -> Candidate:
+        """Candidate ``name`` fitted after ``fixed`` and tested against ``r_before``.
+
+        ``fixed_fit`` is the fit of ``fixed`` alone: an effect of ``RESIDUAL_SCANNED`` is then
+        designed again on the raw data less the fields of the fixed effects.
+        """
+        block = self.designs[name]
+        if name in RESIDUAL_SCANNED and fixed and fixed_fit is not None and name in self.effects:
+            others = sum(
+                (fixed_fit.effect_nt(k) for k in range(len(fixed_fit.blocks))),
+                np.zeros_like(self.data.b_raw_nt),
+            )
+            less = dataclasses.replace(self.data, b_raw_nt=self.data.b_raw_nt - others)
+            again = self.effects[name].design(less, self.train)
+            if again is not None and np.all(np.isfinite(again.g)):
+                block = again
+        fit, r, rms = self.evaluate(fixed, block)
+        if rms_before is None:
+            rms_before = vector_rms_nt(r_before[self.holdout])
+        p, ok = self.judge(fit, r, r_before, rms, rms_before)
+        return Candidate(name, fit, r, rms, p, ok)
+
+    def implausible_reason(
+        self,
+        fixed: Sequence[DesignBlock],
+        cand: Candidate,
+        level: float,
+        rms_before: float,
+        r_before: FloatArray,
+    ) -> str | None:
+        """Why a candidate is implausible: its fit runs into the edge of a physical range.
+
+        The free (unbounded) fit then puts a parameter outside its range: the model explains
+        the data only with unphysical values, whether or not its edge-of-range fit passes the
+        held-out test.
+        """
+        fit = cand.fit
+        if not fit.at_bounds(len(fit.blocks) - 1):
+            return None
+        # The variant the bounded fit chose, refitted freely (no new choice among variants).
+        free, r_free, rms_free = self.fit([*fixed, cand.block], bounded=False)
+        if _twins(free, r_free, fit, cand.residual_nt, self.train):
+            return None  # the range costs nothing: the data leave that direction open
+        p_free, gains_free = self.judge(free, r_free, r_before, rms_free, rms_before)
+        wins = p_free < level and gains_free
+        bl = free.blocks[-1]
+        # Outside by more than 3 standard deviations: a direction the data leave open (a column
+        # the calibration absorbs whole) may take any value and proves nothing; a value
+        # compatible with zero (a crust amplitude of 0 +- 0.1) means the effect is absent.
+        outside = [
+            f"{n} = {float(v):.4g} +- {float(e):.2g} outside {param_range(n).describe()}"
+            for n, v, e in zip(
+                bl.names, free.coef[-1], _sd(free, len(free.blocks) - 1), strict=True
+            )
+            if not (param_range(n).lower - 3.0 * e <= float(v) <= param_range(n).upper + 3.0 * e)
+            and abs(float(v)) > 3.0 * e  # compatible with zero: absent, not implausible
+        ]
+        if not outside:
+            return None
+        how = "wins only by leaving" if wins else "its fit runs out of"
+        return (
+            f"{how} its physical range: "
+            + "; ".join(outside)
+            + f" (held-out vector RMS {rms_free:.3g} nT so, {rms_before:.3g} nT before)"
+        )
+
+    def pick(self, passing: Sequence[Candidate]) -> tuple[Candidate, list[str]]:
+        """The winner among candidates that pass a step, and the models indistinguishable from it.
+
+        Lowest held-out RMS wins; candidates within ``tie_tolerance`` of it, or within
+        ``TIE_MAX_GAP`` and not significantly worse on the held-out chunks (a flexible model
+        standing in for a simpler one, e.g. a 9-parameter orbit error for a time-tag error), are
+        tied and separated by the Bayesian information criterion of the training fit.
+        """
+        top = min(passing, key=lambda c: c.holdout_rms_nt)
+        best_rms = top.holdout_rms_nt
+        hold = self.holdout
+        tied = [
+            c
+            for c in passing
+            if c.holdout_rms_nt <= best_rms * (1.0 + self.tie_tolerance)
+            or (
+                c.holdout_rms_nt <= best_rms * (1.0 + TIE_MAX_GAP)
+                and _chunk_test(c.residual_nt[hold], top.residual_nt[hold], self.n_chunks)[0]
+                >= self.alpha
+            )
+        ]
+        best = min(tied, key=lambda c: _bic(c.fit, c.residual_nt, self.train))
+        # Models the data cannot tell apart are reported with the one named (e.g. under steady
+        # attitude rates a time-tag error and an along-track orbit error differ only by the
+        # Earth's rotation once the 12 parameters absorb the attitude term).
+        bic_best = _bic(best.fit, best.residual_nt, self.train)
+        twins = sorted(
+            c.name
+            for c in tied
+            if c.name != best.name
+            and (
+                _twins(c.fit, c.residual_nt, best.fit, best.residual_nt, self.train)
+                or _bic(c.fit, c.residual_nt, self.train) - bic_best < NEAR_TWIN_BIC
+            )
+        )
+        return best, twins
+
+    def pair(
+        self,
+        fixed: Sequence[DesignBlock],
+        options: Sequence[Candidate],
+        r_before: FloatArray,
+        rms_before: float,
+    ) -> tuple[Candidate, Candidate] | None:
+        """Two effects that pass together when neither passes alone.
+
+        Two effects present at once can each leave the other's misfit in a single-effect fit
+        (a thermal offset and a bias step), so that neither single fit passes the held-out test
+        while both together do. Every pair of ``options`` (fitted after ``fixed``, variants as
+        chosen alone) is fitted jointly; a pair passes when it shrinks the held-out residual
+        significantly (Bonferroni over the pairs) and each member does so on top of the other.
+        The pair with the lowest held-out RMS is returned, in order of their single RMS.
+        """
+        from itertools import combinations
+
+        pairs = list(combinations(sorted(options, key=lambda c: c.holdout_rms_nt), 2))
+        if not pairs:
+            return None
+        level = self.alpha / len(pairs)
+        best: tuple[float, Candidate, Candidate] | None = None
+        for a, b in pairs:
+            fit, r, rms = self.fit([*fixed, a.block, b.block])
+            if not self.gains(rms, rms_before) or fit.at_bounds(len(fit.blocks) - 1):
+                continue
+            if fit.at_bounds(len(fit.blocks) - 2):
+                continue
+            if _chunk_test(r_before[self.holdout], r[self.holdout], self.n_chunks)[0] >= level:
+                continue
+            # each on top of the other: a's own test compares b alone (b's residual) with both
+            tests = [
+                self.judge(fit, r, other.residual_nt, rms, other.holdout_rms_nt, k=k)
+                for k, other in ((-2, b), (-1, a))
+            ]
+            ok = all(p < level and gains for p, gains in tests)
+            if ok and (best is None or rms < best[0]):
+                best = (rms, a, b)
+        return None if best is None else (best[1], best[2])
+
+    def backward(self, blocks: Sequence[DesignBlock], names: Sequence[str]) -> str | None:
+        """The selected effect that no longer earns its place beside the others, if any.
+
+        Each effect is re-tested conditional on all the others (joint refit without it, held-out
+        chunk test on its support, Bonferroni over the selected set, and the ``min_gain``
+        shrink); the one with the largest p-value among those that fail is returned.
+        """
+        if len(blocks) < 2:
+            return None
+        full, r_full, rms_full = self.fit(blocks)
+        level = self.alpha / len(blocks)
+        worst: tuple[float, str] | None = None
+        for k, name in enumerate(names):
+            _, r_k, rms_k = self.fit([b for j, b in enumerate(blocks) if j != k])
+            p, gains = self.judge(full, r_full, r_k, rms_full, rms_k, k=k)
+            fails = p >= level or not gains
+            if fails and (worst is None or p > worst[0]):
+                worst = (p, name)
+        return None if worst is None else worst[1]
 
 
 def attribute(
@@ -722,6 +1042,14 @@ def attribute(
     fit_mask: BoolArray | None = None,
 ) -> Attribution:
     """Attribute the calibration residual to catalogue effects, judged on held-out later blocks.
+
+    Stepwise selection: forward steps add the best candidate that shrinks the held-out residual
+    significantly (:meth:`Selection.pick`; when no single candidate passes, a pair that passes
+    together, :meth:`Selection.pair`), then every selected effect is re-tested conditional on all
+    the others and the weakest that fails is dropped (:meth:`Selection.backward`); forward steps
+    resume without it. A candidate that is ``implausible`` at one step (its fit leaves its
+    physical range, e.g. because another effect's field is still in the residual) is tried again
+    at the next.
 
     Parameters
     ----------
@@ -770,114 +1098,38 @@ def attribute(
         block = eff.design(data, train)
         if block is not None and np.all(np.isfinite(block.g)):
             designs[eff.name] = block
+    sel = Selection(
+        data,
+        train,
+        holdout,
+        designs,
+        effects={e.name: e for e in candidates},
+        robust=robust,
+        n_chunks=n_chunks,
+        n_chunks_local=n_chunks_local,
+        alpha=alpha,
+        min_gain=min_gain,
+        tie_tolerance=tie_tolerance,
+    )
 
-    def evaluate(
-        fixed: list[DesignBlock], block: DesignBlock, *, bounded: bool = True
-    ) -> tuple[JointFit, FloatArray, float]:
-        chosen = _resolve(data, train, fixed, block, bounded=bounded)
-        fit = fit_joint(data, train, [*fixed, chosen], robust=robust, bounded=bounded)
-        r = data.b_raw_nt - fit.predict_nt(data)
-        return fit, r, vector_rms_nt(r[holdout])
-
-    def test(fit: JointFit, r: FloatArray, r_before: FloatArray) -> float:
-        sup, chunks = _support(fit, train, holdout, n_chunks, n_chunks_local)
-        return _chunk_test(r_before[sup], r[sup], chunks)[0]
-
+    # Single-effect scores against the baseline (also the first forward step).
+    single = {name: sel.candidate([], name, r_base, None, base_rms) for name in designs}
+    # Implausible against the baseline: reported with the single fits of the candidates not
+    # selected. Within the selection a candidate is judged again at every step.
     implausible: dict[str, str] = {}
+    chosen, indistinguishable, dropped = _stepwise(
+        sel, single, base_rms, r_base, max_steps, implausible
+    )
+    selected = [c.name for c in chosen]
+    chosen_blocks = [c.block for c in chosen]
 
-    def leaves_range(
-        fixed: list[DesignBlock],
-        block: DesignBlock,
-        fit: JointFit,
-        level: float,
-        rms_before: float,
-        r_before: FloatArray,
-    ) -> str | None:
-        """Why a candidate is implausible: its fit runs into the edge of a physical range.
-
-        The free (unbounded) fit then puts a parameter outside its range: the model explains
-        the data only with unphysical values, whether or not its edge-of-range fit passes the
-        held-out test.
-        """
-        if not fit.at_bounds(len(fit.blocks) - 1):
-            return None
-        # The variant the bounded fit chose, refitted freely (no new choice among variants).
-        free, r_free, rms_free = evaluate(fixed, fit.blocks[-1], bounded=False)
-        r_bounded = data.b_raw_nt - fit.predict_nt(data)
-        if _twins(("", free, r_free), ("", fit, r_bounded), train):
-            return None  # the range costs nothing: the data leave that direction open
-        wins = test(free, r_free, r_before) < level and rms_free < rms_before * (1.0 - min_gain)
-        bl = free.blocks[-1]
-        # Outside by more than 3 standard deviations: a direction the data leave open (a column
-        # the calibration absorbs whole) may take any value and proves nothing; a value
-        # compatible with zero (a crust amplitude of 0 +- 0.1) means the effect is absent.
-        outside = [
-            f"{n} = {float(v):.4g} +- {float(e):.2g} outside {param_range(n).describe()}"
-            for n, v, e in zip(
-                bl.names, free.coef[-1], _sd(free, len(free.blocks) - 1), strict=True
-            )
-            if not (param_range(n).lower - 3.0 * e <= float(v) <= param_range(n).upper + 3.0 * e)
-            and abs(float(v)) > 3.0 * e  # compatible with zero: absent, not implausible
-        ]
-        if not outside:
-            return None
-        how = "wins only by leaving" if wins else "its fit runs out of"
-        return (
-            f"{how} its physical range: "
-            + "; ".join(outside)
-            + f" (held-out vector RMS {rms_free:.3g} nT so, {rms_before:.3g} nT before)"
-        )
-
-    # Single-effect scores against the baseline (also the first greedy step).
-    single: dict[str, tuple[JointFit, FloatArray, float, float]] = {}
-    for name, block in designs.items():
-        fit, r, rms = evaluate([], block)
-        single[name] = (fit, r, rms, test(fit, r, r_base))
-
-    selected: list[str] = []
-    indistinguishable: dict[str, list[str]] = {}
-    chosen_blocks: list[DesignBlock] = []
+    # Each selected effect scored as a step on top of the ones before it (joint refits).
     step_scores: list[EffectScore] = []
     step_residuals: list[tuple[FloatArray, FloatArray]] = []
-    current_r = r_base
-    current_rms = base_rms
-    current_fit = base
-    for step in range(1, max_steps + 1):
-        remaining = [n for n in designs if n not in selected and n not in implausible]
-        if not remaining:
-            break
-        # Bonferroni over the candidates still in play: with the effects already selected in
-        # the model, each step is a new family of tests of what is left (Holm's step-down).
-        level = alpha / len(remaining)
-        passing: list[tuple[str, JointFit, FloatArray, float, float]] = []
-        for name in remaining:
-            if step == 1:
-                fit, r, rms, p = single[name]
-            else:
-                fit, r, rms = evaluate(chosen_blocks, designs[name])
-                p = test(fit, r, current_r)
-            reason = leaves_range(chosen_blocks, designs[name], fit, level, current_rms, current_r)
-            if reason is not None:
-                implausible[name] = reason
-            elif p < level and rms < current_rms * (1.0 - min_gain):
-                passing.append((name, fit, r, rms, p))
-        if not passing:
-            break
-        # Lowest held-out RMS wins; candidates within ``tie_tolerance`` of it (near-equivalent
-        # models, e.g. a time-tag error and an along-track error under a steady spin) are
-        # separated by the Bayesian information criterion of the training fit.
-        best_rms = min(c[3] for c in passing)
-        tied = [c for c in passing if c[3] <= best_rms * (1.0 + tie_tolerance)]
-        best = min(tied, key=lambda c: _bic(c[1], c[2], train))
-        # Models the data cannot tell apart are reported with the one named (e.g. under steady
-        # attitude rates a time-tag error and an along-track orbit error differ only by the
-        # Earth's rotation once the 12 parameters absorb the attitude term).
-        twins = [c for c in tied if c[0] != best[0] and _twins(c, best, train)]
-        name, fit, r, rms, p = best
-        if twins:
-            indistinguishable[name] = sorted(c[0] for c in twins)
-        selected.append(name)
-        chosen_blocks.append(fit.blocks[-1])
+    current_r, current_rms, current_fit = r_base, base_rms, base
+    for step, name in enumerate(selected, start=1):
+        fit, r, rms = sel.fit(chosen_blocks[:step])
+        p = sel.test(fit, r, current_r)
         step_scores.append(
             EffectScore(
                 name, True, current_rms, rms, p, _params(fit, len(fit.blocks) - 1), step=step
@@ -885,6 +1137,8 @@ def attribute(
         )
         step_residuals.append((current_r, r))
         current_r, current_rms, current_fit = r, rms, fit
+    for name in selected:
+        implausible.pop(name, None)
 
     # Drop-one unique contributions of the selected set.
     unique: dict[str, float] = {}
@@ -893,10 +1147,8 @@ def attribute(
     elif len(selected) > 1:
         for k, name in enumerate(selected):
             others = [b for j, b in enumerate(chosen_blocks) if j != k]
-            fit = fit_joint(data, train, others, robust=robust)
-            r = data.b_raw_nt - fit.predict_nt(data)
-            unique[name] = vector_rms_nt(r[holdout]) - current_rms
-
+            _, _, rms_k = sel.fit(others)
+            unique[name] = rms_k - current_rms
     cal_basis = _calibration_basis(data, train)
     effects: list[EffectScore] = []
     for k, sc in enumerate(step_scores):
@@ -920,22 +1172,23 @@ def attribute(
             )
         )
     rest = sorted(
-        (n for n in single if n not in selected), key=lambda n: (n in implausible, single[n][2])
+        (n for n in single if n not in selected),
+        key=lambda n: (n in implausible, single[n].holdout_rms_nt),
     )
     for name in rest:
-        fit, r, rms, p = single[name]
+        c = single[name]
         effects.append(
             EffectScore(
                 name,
                 False,
                 base_rms,
-                rms,
-                p,
-                _params(fit, 0),
+                c.holdout_rms_nt,
+                c.p_value,
+                _params(c.fit, 0),
                 implausible=implausible.get(name),
-                intervals=_intervals(fit, 0, r, train),
-                shrink_interval=_shrink_interval(r_base, r, holdout, n_chunks),
-                absorbed_fraction=_absorbed_fraction(fit, 0, train, cal_basis),
+                intervals=_intervals(c.fit, 0, c.residual_nt, train),
+                shrink_interval=_shrink_interval(r_base, c.residual_nt, holdout, n_chunks),
+                absorbed_fraction=_absorbed_fraction(c.fit, 0, train, cal_basis),
             )
         )
 
@@ -943,12 +1196,12 @@ def attribute(
         selected[0] if selected else "none",
         indistinguishable.get(selected[0], []) if selected else [],
         r_base,
-        {n: v[1] for n, v in single.items() if n not in implausible},
+        {n: v.residual_nt for n, v in single.items() if n not in implausible},
         holdout,
         n_chunks,
         min_gain,
     )
-    flat = all(v[2] >= base_rms * (1.0 - min_gain) for v in single.values())
+    flat = all(v.holdout_rms_nt >= base_rms * (1.0 - min_gain) for v in single.values())
     if not selected and flat:
         # Nothing moves the held-out residual: look for an effect the calibration absorbed whole.
         absorbed = _absorbed_by_calibration(data, designs, base_rms, robust=robust)
@@ -983,7 +1236,144 @@ def attribute(
         implausible=implausible,
         has_prior=data.calibration_prior is not None,
         span_s=float(data.t_utc_s[-1] - data.t_utc_s[0]),
+        dropped=dropped,
     )
+
+
+def _stepwise(
+    sel: Selection,
+    single: dict[str, Candidate],
+    base_rms: float,
+    r_base: FloatArray,
+    max_steps: int,
+    implausible: dict[str, str],
+    rounds: int = 3,
+) -> tuple[list[Candidate], dict[str, list[str]], list[str]]:
+    """Forward steps, a swap pass, then backward elimination; again while the backward step drops.
+
+    Returns the selected candidates in selection order, the models indistinguishable from each
+    (by name), and the names dropped by the backward step (they do not re-enter).
+    """
+    chosen: list[Candidate] = []
+    twins: dict[str, list[str]] = {}
+    dropped: list[str] = []
+    for _ in range(rounds):
+        _forward(sel, chosen, twins, single, base_rms, r_base, max_steps, implausible, dropped)
+        _swap(sel, chosen, twins, single, base_rms, r_base, dropped)
+        out = sel.backward([c.block for c in chosen], [c.name for c in chosen])
+        if out is None:
+            break
+        chosen = [c for c in chosen if c.name != out]
+        twins.pop(out, None)
+        dropped.append(out)
+    return chosen, twins, dropped
+
+
+def _swap(
+    sel: Selection,
+    chosen: list[Candidate],
+    twins: dict[str, list[str]],
+    single: dict[str, Candidate],
+    base_rms: float,
+    r_base: FloatArray,
+    excluded: Sequence[str],
+) -> None:
+    """Each selected effect re-chosen given all the others (``chosen`` changed in place).
+
+    A forward step chooses beside the effects selected *before* it, so a flexible model can win
+    an early step by standing in for an effect another one hides at that point (a 9-parameter
+    orbit error for a time-tag error under a nonlinearity). Here every position is chosen again
+    by the forward step's rule -- significant against the others alone, lowest held-out RMS,
+    ties and near-ties by training BIC -- among all the candidates not selected elsewhere.
+    """
+    if len(chosen) < 2:
+        return
+    for k in range(len(chosen)):
+        others = [c.block for j, c in enumerate(chosen) if j != k]
+        o_fit, r_o, rms_o = sel.fit(others)
+        names_in = {c.name for j, c in enumerate(chosen) if j != k}
+        pool = [n for n in sel.designs if n not in names_in and n not in excluded]
+        level = sel.alpha / len(pool)
+        passing = []
+        for name in pool:
+            cand = sel.candidate(others, name, r_o, o_fit, rms_o)
+            if sel.implausible_reason(others, cand, level, rms_o, r_o) is not None:
+                continue
+            if cand.passes(level):
+                passing.append(cand)
+        if not passing:
+            continue  # the backward step judges it
+        best, tw = sel.pick(passing)
+        # the same effect may come back in another variant (chosen given all the others)
+        twins.pop(chosen[k].name, None)
+        if tw:
+            twins[best.name] = tw
+        chosen[k] = best
+
+
+def _forward(
+    sel: Selection,
+    chosen: list[Candidate],
+    twins: dict[str, list[str]],
+    single: dict[str, Candidate],
+    base_rms: float,
+    r_base: FloatArray,
+    max_steps: int,
+    implausible: dict[str, str],
+    excluded: Sequence[str],
+) -> None:
+    """Forward steps from ``chosen`` (extended in place) until nothing passes or ``max_steps``.
+
+    Each step tests every candidate not yet chosen (nor ``excluded``) fitted jointly with the
+    chosen effects, against the model without it, with Bonferroni over the candidates of the
+    step (Holm's step-down over the steps). A candidate implausible at this step is skipped
+    (``implausible`` keeps its latest reason) and tried again at the next.
+    """
+    blocks = [c.block for c in chosen]
+    current_fit: JointFit | None = None
+    if chosen:
+        current_fit, current_r, current_rms = sel.fit(blocks)
+    else:
+        current_r, current_rms = r_base, base_rms
+    while len(chosen) < max_steps:
+        names_in = {c.name for c in chosen}
+        remaining = [n for n in sel.designs if n not in names_in and n not in excluded]
+        if not remaining:
+            break
+        level = sel.alpha / len(remaining)
+        passing: list[Candidate] = []
+        plausible: list[Candidate] = []
+        for name in remaining:
+            cand = (
+                single[name]
+                if not chosen
+                else sel.candidate(blocks, name, current_r, current_fit, current_rms)
+            )
+            reason = sel.implausible_reason(blocks, cand, level, current_rms, current_r)
+            if reason is not None:
+                implausible[name] = reason
+                continue
+            plausible.append(cand)
+            if cand.passes(level):
+                passing.append(cand)
+        new: list[Candidate]
+        if passing:
+            best, tw = sel.pick(passing)
+            if tw:
+                twins[best.name] = tw
+            new = [best]
+        else:
+            pair = (
+                sel.pair(blocks, plausible, current_r, current_rms)
+                if len(chosen) + 2 <= max_steps
+                else None
+            )
+            if pair is None:
+                break
+            new = list(pair)
+        chosen.extend(new)
+        blocks.extend(c.block for c in new)
+        current_fit, current_r, current_rms = sel.fit(blocks)
 
 
 def _absorbed_by_calibration(
@@ -1048,10 +1438,12 @@ def _absorbed_by_calibration(
 TWIN_SEPARATION = 9.0
 
 
-def _twins(a: tuple[Any, ...], b: tuple[Any, ...], train: BoolArray) -> bool:
-    """Whether two candidate fits ``(name, fit, residual, rms, p)`` predict the same data."""
-    d = a[2][train] - b[2][train]  # difference of residuals = difference of predictions
-    sigma = max(min(a[1].sigma_nt, b[1].sigma_nt), 1e-9)
+def _twins(
+    fit_a: JointFit, r_a: FloatArray, fit_b: JointFit, r_b: FloatArray, train: BoolArray
+) -> bool:
+    """Whether two fits (with their residuals at every sample) predict the same data."""
+    d = r_a[train] - r_b[train]  # difference of residuals = difference of predictions
+    sigma = max(min(fit_a.sigma_nt, fit_b.sigma_nt), 1e-9)
     return bool(float(np.sum(d**2)) / sigma**2 < TWIN_SEPARATION)
 
 

@@ -445,23 +445,20 @@ def plan_compound_cases(n_cases: int, *, seed: int) -> list[CompoundCase]:
     return cases
 
 
-def run_compound_case(
+def simulate_compound_world(
     case: CompoundCase,
     *,
     tle_text: str,
     n_orbits: float = 4.0,
     cadence_s: float = 10.0,
     crust_model: str | None = "LCS-1",
-) -> dict[str, Any]:
-    """Simulate a world with several effects, diagnose it blind, score found / spurious effects.
+) -> tuple[Any, Any]:
+    """The world of a compound case and the diagnosis data built from its telemetry and TLE.
 
-    An injected effect is *observable* when removing every injected field but its own leaves a
-    held-out gap of at least ``OBSERVABLE_GAIN`` over removing them all (perfect oracle); recall
-    counts the observable ones. A selected effect listed as indistinguishable from an injected one
-    (or the reverse) counts as found, not as spurious.
+    Returns ``(world, data)``: the :func:`orbitcal.simulate.simulate_world` result (with the
+    truth) and the :class:`orbitcal.diagnose.effects.DiagnosisData` the diagnosis sees.
     """
     from orbitcal.diagnose.api import diagnosis_data
-    from orbitcal.diagnose.effects import DiagnosisData
     from orbitcal.orbit import Orbit
     from orbitcal.simulate import NadirLVLH, Tumbling, select_tle, simulate_world
 
@@ -484,7 +481,6 @@ def run_compound_case(
         _scaled_effect(n, m, rng) for n, m in zip(case.effects, case.magnitudes, strict=True)
     ]
     period_s = 86400.0 / float(tle.line2[52:63])
-    t0 = time.perf_counter()
     world = simulate_world(
         tle,
         start_utc_s=start,
@@ -495,6 +491,30 @@ def run_compound_case(
         effects=effects,
     )
     data = diagnosis_data(world.telemetry, orbit=Orbit.from_tle(tle.text), crust_model=crust_model)
+    return world, data
+
+
+def run_compound_case(
+    case: CompoundCase,
+    *,
+    tle_text: str,
+    n_orbits: float = 4.0,
+    cadence_s: float = 10.0,
+    crust_model: str | None = "LCS-1",
+) -> dict[str, Any]:
+    """Simulate a world with several effects, diagnose it blind, score found / spurious effects.
+
+    An injected effect is *observable* when removing every injected field but its own leaves a
+    held-out gap of at least ``OBSERVABLE_GAIN`` over removing them all (perfect oracle); recall
+    counts the observable ones. A selected effect listed as indistinguishable from an injected one
+    (or the reverse) counts as found, not as spurious.
+    """
+    from orbitcal.diagnose.effects import DiagnosisData
+
+    t0 = time.perf_counter()
+    world, data = simulate_compound_world(
+        case, tle_text=tle_text, n_orbits=n_orbits, cadence_s=cadence_s, crust_model=crust_model
+    )
     att = attribute(data, split_tests=False)
     elapsed = time.perf_counter() - t0
 

@@ -88,6 +88,10 @@ PARAM_RANGES: tuple[tuple[str, ParamRange], ...] = (
         _sym(7200.0, "ring-current rate of change <= 300 nT/h (extreme storms)"),
     ),
     (
+        "uniform_recovering_nt",
+        _sym(2000.0, "decaying storm-time ring-current field at the start: |Dst| <= 1760 nT"),
+    ),
+    (
         "rc_coefficient",
         ParamRange(0.3, 3.0, "field per nT of RC index, external + induced", 1.0, 0.5),
     ),

@@ -518,6 +518,12 @@ def _design_time_offset(data: DiagnosisData, train: BoolArray) -> DesignBlock | 
     )
 
 
+#: Decay times of the ring current's recovery phase tried by the external-field model [h].
+EXTERNAL_RECOVERY_TIMES_H: tuple[float, ...] = tuple(
+    float(x) for x in np.geomspace(2.0, 24.0, 10).round(2)
+)
+
+
 def _design_external(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
     axis = data.dipole_axis_body
     tau = _tau_days(data, train)
@@ -528,6 +534,19 @@ def _design_external(data: DiagnosisData, train: BoolArray) -> DesignBlock | Non
             variant="dipole_axis",
         )
     ]
+    # A storm's recovery phase: the ring-current field decays as exp(-t / tau) with tau of a few
+    # to twenty hours (Burton et al. 1975: 7.7 h; O'Brien & McPherron 2000: 3-20 h), which a
+    # linear trend extrapolates badly over the held-out blocks; tau from a grid, by training BIC.
+    t_rel_s = data.t_utc_s - float(data.t_utc_s[0])
+    for tau_h in EXTERNAL_RECOVERY_TIMES_H:
+        decay = np.exp(-t_rel_s / (tau_h * 3600.0))
+        options.append(
+            DesignBlock(
+                np.stack([axis, axis * decay[:, None]], axis=2),
+                ["uniform_along_dipole_nt", "uniform_recovering_nt"],
+                variant=f"recovery_{tau_h:.3g}h",
+            )
+        )
     rc = data.rc_index_nt
     if rc is not None and _varies(rc[train], tol=1.0):
         options.append(

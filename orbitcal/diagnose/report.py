@@ -184,6 +184,8 @@ def build_report(
         "where": _clean(where),
         "final": {
             "effects": list(att.selected),
+            # selected by a forward step, removed again when re-tested beside the others
+            "dropped": list(att.dropped),
             "holdout_rms_nt": _rms(att.final_rms_nt),
             "norm_holdout_rms_nt": _num(att.final_rms_nt),
             "shrink": _num(att.baseline_rms_nt / max(att.final_rms_nt, 1e-12)),

@@ -1,0 +1,139 @@
+"""Several effects at once: the stepwise selection of :func:`orbitcal.diagnose.attribute`.
+
+Fixed worlds of the compound benchmark (``orbitcal bench diagnose --compound``, plan seed 1) on
+which the forward-only selection of 2026-11-23 failed, each for one reason the stepwise selection
+addresses; and the named steps (:class:`orbitcal.diagnose.attribution.Selection`) one by one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_diagnose_worlds import make_world
+
+from orbitcal.diagnose.attribution import (
+    Selection,
+    attribute,
+    fit_joint,
+    time_blocks,
+    vector_rms_nt,
+)
+from orbitcal.diagnose.bench import CompoundCase, run_compound_case
+from orbitcal.diagnose.effects import get_effect
+
+pytestmark = pytest.mark.usefixtures("single_thread_blas")  # tests/conftest.py
+
+
+def _found_exactly(result: dict[str, object], names: set[str]) -> None:
+    assert set(result["selected"]) == names, result  # type: ignore[call-overload]
+    assert result["spurious"] == [], result
+    assert all(result["found"].values()), result  # type: ignore[attr-defined]
+
+
+def test_two_effects_that_pass_only_together_are_both_found(real_tles_text: str) -> None:
+    """A thermal offset and a bias step (nadir): fitted alone, each leaves the other's misfit and
+    neither passes the held-out test (temperature p = 0.79, drift p = 0.08); together both are
+    significant. Forward-only selection named nothing (held-out 19.5 nT left); the pair step
+    finds both and nothing else."""
+    case = CompoundCase(
+        18, ("temperature", "parameter_drift"), (1.0, 1.0), "nadir", 39451, 1625994511
+    )
+    out = run_compound_case(case, tle_text=real_tles_text)
+    _found_exactly(out, {"temperature", "parameter_drift"})
+    assert out["final_holdout_rms_nt"] < 0.5 * out["baseline_holdout_rms_nt"]
+
+
+def test_a_flexible_stand_in_is_swapped_for_the_effect_it_stood_for(real_tles_text: str) -> None:
+    """A 1 s time-tag error under a doubled nonlinearity and a thermal offset (tumbling ISS): at
+    the first step the time offset needs dt = -8.5 s (implausible, the nonlinearity is still in the
+    residual) and the 9-parameter orbit error stands in for it; the forward-only selection kept
+    orbit_error. Chosen again beside the other two, the time offset wins (tie by training BIC)."""
+    case = CompoundCase(
+        17,
+        ("time_offset", "nonlinearity", "temperature"),
+        (2.0, 2.0, 1.0),
+        "tumbling",
+        25544,
+        675405135,
+    )
+    out = run_compound_case(case, tle_text=real_tles_text)
+    _found_exactly(out, {"time_offset", "nonlinearity", "temperature"})
+    assert out["verdict"] in case.effects
+
+
+def test_recovering_ring_current_leaves_no_room_for_a_drift(real_tles_text: str) -> None:
+    """A storm's ring current decaying with a 5.6 h recovery time and a magnetorquer (nadir):
+    with a linear trend only, the external model left a residual that a bias step explained
+    (drift named, never injected); the recovery-phase variant and the swap pass leave both
+    effects and no drift."""
+    case = CompoundCase(
+        6, ("magnetorquer", "external_field"), (1.0, 2.0), "nadir", 39452, 911820705
+    )
+    out = run_compound_case(case, tle_text=real_tles_text)
+    _found_exactly(out, {"magnetorquer", "external_field"})
+
+
+def _selection(
+    effect: str, *, seed: int = 3, attitude: str = "tumbling", magnitude: float = 1.0
+) -> Selection:
+    data = make_world(effect, magnitude, attitude=attitude, seed=seed).data
+    train, holdout, _ = time_blocks(data.t_utc_s)
+    designs = {}
+    for name in ("temperature", "magnetorquer", "nonlinearity", "time_offset", "orbit_error"):
+        block = get_effect(name).design(data, train)
+        if block is not None:
+            designs[name] = block
+    return Selection(data, train, holdout, designs)
+
+
+def test_backward_step_drops_an_effect_that_adds_nothing_beside_the_others() -> None:
+    sel = _selection("magnetorquer")
+    blocks = [sel.designs["magnetorquer"], sel.designs["nonlinearity"]]
+    assert sel.backward(blocks, ["magnetorquer", "nonlinearity"]) == "nonlinearity"
+    assert sel.backward(blocks[:1], ["magnetorquer"]) is None  # one effect: nothing to re-test
+
+
+def test_backward_step_keeps_two_real_effects() -> None:
+    """A world with a magnetorquer coupling and a thermal offset at once (the second added to a
+    magnetorquer world): each is significant beside the other."""
+    sel = _selection("magnetorquer")
+    temp = sel.designs["temperature"]
+    extra = temp.g @ np.array([3.0, -2.0, 2.5, 0.0, 0.0, 0.0])  # nT/degC offsets
+    import dataclasses
+
+    data = dataclasses.replace(sel.data, b_raw_nt=sel.data.b_raw_nt + extra)
+    sel = Selection(data, sel.train, sel.holdout, sel.designs)
+    blocks = [sel.designs["magnetorquer"], temp]
+    assert sel.backward(blocks, ["magnetorquer", "temperature"]) is None
+
+
+def test_candidate_is_judged_against_the_model_before_it() -> None:
+    sel = _selection("magnetorquer")
+    base = fit_joint(sel.data, sel.train, [])
+    r_base = sel.data.b_raw_nt - base.predict_nt(sel.data)
+    real = sel.candidate([], "magnetorquer", r_base)
+    assert real.passes(0.05 / len(sel.designs))
+    assert real.holdout_rms_nt < vector_rms_nt(r_base[sel.holdout])
+    # with the coupling in the model, nonlinearity has nothing left to explain
+    after = sel.candidate([real.block], "nonlinearity", real.residual_nt, real.fit)
+    assert not after.passes(0.05 / len(sel.designs))
+
+
+def test_pick_names_the_simpler_of_two_models_the_held_out_data_cannot_tell_apart() -> None:
+    """A time-tag error under a steady spin, on a propagated orbit: the along-track error model
+    explains the same held-out data; the training BIC names one and lists the other."""
+    sel = _selection("time_offset", seed=4, magnitude=0.3)
+    base = fit_joint(sel.data, sel.train, [])
+    r_base = sel.data.b_raw_nt - base.predict_nt(sel.data)
+    cands = [sel.candidate([], n, r_base) for n in ("time_offset", "orbit_error")]
+    assert all(c.passes(0.05 / 2) for c in cands)
+    best, twins = sel.pick(cands)
+    other = ({"time_offset", "orbit_error"} - {best.name}).pop()
+    assert twins == [other]
+
+
+def test_compound_attribution_reports_dropped_effects_separately() -> None:
+    """The Attribution lists what the backward step removed; never one of the selected."""
+    att = attribute(make_world("magnetorquer", attitude="tumbling", seed=3).data, split_tests=False)
+    assert att.verdict == "magnetorquer"
+    assert not set(att.dropped) & set(att.selected)
