@@ -9,9 +9,11 @@ from __future__ import annotations
 import os
 import socket
 from pathlib import Path
+from typing import Any
 
 import pytest
 from hypothesis import HealthCheck, settings
+from shared_worlds import REAL_TLES_FILE, SWARM_A_2022_OMM, SWARM_A_2022_TLE
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 AUTHORITIES = REPO_ROOT / "tests" / "authorities"
@@ -56,10 +58,6 @@ def authorities() -> Path:
     return AUTHORITIES
 
 
-#: The real CelesTrak sets (Swarm A/B/C, ISS; provenance in tests/authorities/README.md).
-REAL_TLES_FILE = AUTHORITIES / "swarm_iss_real_tles.tle"
-
-
 @pytest.fixture(scope="session")
 def real_tles_text() -> str:
     """The 56 real TLE sets of ``tests/authorities/swarm_iss_real_tles.tle`` as one text."""
@@ -93,3 +91,24 @@ def _torch_single_thread() -> None:
     except ImportError:  # pragma: no cover
         return
     torch.set_num_threads(1)
+
+
+@pytest.fixture(scope="session")
+def swarm_a_2022_tle() -> str:
+    """Swarm A's set of 2022-08-01 as two lines (``shared_worlds.SWARM_A_2022_TLE``)."""
+    return SWARM_A_2022_TLE
+
+
+@pytest.fixture
+def swarm_a_2022_omm() -> dict[str, Any]:
+    """The same set as a CelesTrak JSON OMM (a fresh copy: tests may alter it)."""
+    return dict(SWARM_A_2022_OMM)
+
+
+@pytest.fixture(scope="session")
+def swarm_a_temperature_world() -> tuple[Any, Any]:
+    """``(world, orbit)``: ``shared_worlds.swarm_a_temperature_world()``, built once per session
+    (20 000 s tumbling with temperature and magnetorquer effects, 2 nT noise)."""
+    from shared_worlds import swarm_a_temperature_world as build
+
+    return build()

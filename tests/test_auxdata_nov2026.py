@@ -42,7 +42,6 @@ def empty_data_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     auxdata.reload()
 
 
-@pytest.mark.slow  # 28 s measured
 def test_november_2026_world_end_to_end(
     tmp_path: Path, empty_data_dir: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -10,11 +10,10 @@ from pathlib import Path
 
 import pytest
 from sgp4.exporter import export_omm
+from shared_worlds import REAL_TLES_FILE
 
 from orbitcal.cli import main
 from orbitcal.orbit import read_tle_sets
-
-REAL_TLES_FILE = Path(__file__).resolve().parent / "authorities" / "swarm_iss_real_tles.tle"
 
 
 @pytest.fixture(scope="module")

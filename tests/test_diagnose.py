@@ -201,6 +201,7 @@ def test_cli_diagnose_rejects_missing_tle(tmp_path: Path) -> None:
     assert main(["diagnose", str(table), "--out", str(tmp_path / "r.json")]) == 2
 
 
+@pytest.mark.slow  # 31-42 s measured (load 5, 2 cores)
 def test_reduced_blind_benchmark(real_tles_text: str) -> None:
     """24 blind cases (every class twice: nadir and tumbling, default magnitude): the full run of
     >= 200 cases is ``orbitcal bench diagnose`` (benchmarks/results/diagnose.md)."""

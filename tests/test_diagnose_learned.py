@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from shared_worlds import swarm_class_sensor
 
 from orbitcal.diagnose.learned import sh_design_nec
 from orbitcal.field.synthesis import synth_internal_nec_nt, to_degree_blocks
@@ -57,17 +58,12 @@ def _multi_day_data(days: float, *, crust: bool) -> object:
     from orbitcal.data import real_tles_text
     from orbitcal.diagnose.api import diagnosis_data
     from orbitcal.orbit import Orbit
-    from orbitcal.sensor import SensorModel
     from orbitcal.simulate import Tumbling, make_effect, parse_tles, simulate_world
 
     swarm_a = [s for s in parse_tles(real_tles_text()) if s.norad_id == 39452]
     tle = max(swarm_a, key=lambda s: s.epoch_utc_s)
     rng = np.random.default_rng(9)
-    sensor = SensorModel(
-        a_matrix=np.eye(3) + rng.normal(scale=0.01, size=(3, 3)),
-        bias_nt=rng.normal(scale=50.0, size=3),
-        noise_std_nt=0.5,  # a vector fluxgate of the Swarm class
-    )
+    sensor = swarm_class_sensor(rng)  # tests/shared_worlds.py
     world = simulate_world(
         tle,
         start_utc_s=tle.epoch_utc_s + 3600.0,

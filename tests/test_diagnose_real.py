@@ -16,6 +16,7 @@ import h5py
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
+from shared_worlds import swarm_class_sensor
 
 from orbitcal import frames
 from orbitcal.diagnose.api import _field_body, diagnose_parts, diagnosis_data
@@ -288,17 +289,12 @@ def test_real_orbit_error_from_an_older_tle(attitude: str) -> None:
 
 def test_real_crust_mf7_found_with_lcs1() -> None:
     from orbitcal.orbit import Orbit
-    from orbitcal.sensor import SensorModel
     from orbitcal.simulate import Tumbling, make_effect, simulate_world
 
     sets = _swarm_tles()
     tle = sets[-1]
     rng = np.random.default_rng(9)
-    sensor = SensorModel(
-        a_matrix=np.eye(3) + rng.normal(scale=0.01, size=(3, 3)),
-        bias_nt=rng.normal(scale=50.0, size=3),
-        noise_std_nt=0.5,  # a vector fluxgate of the Swarm class
-    )
+    sensor = swarm_class_sensor(rng)  # tests/shared_worlds.py
     world = simulate_world(
         tle,  # type: ignore[arg-type]
         start_utc_s=tle.epoch_utc_s + 3600.0,  # type: ignore[attr-defined]

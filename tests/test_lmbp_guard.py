@@ -15,9 +15,7 @@ import pytest
 from orbitcal.orbit import Orbit
 from orbitcal.pipeline import calibrate_telemetry
 from orbitcal.reproduce.onorbit import orbit_world
-from orbitcal.sensor import SensorModel
-from orbitcal.simulate import attitude_profile, make_effect, simulate_world
-from orbitcal.simulate.world import select_tle
+from orbitcal.simulate.world import World
 
 
 def _holdout(telemetry: object, orbit: Orbit, method: str) -> tuple[float, dict[str, object]]:
@@ -41,22 +39,10 @@ def test_affine_sensor_on_nadir_orbit_gets_the_linear_solution() -> None:
     assert rms_net == pytest.approx(rms_lin, rel=0.01)  # was 47.9 nT against 4.93 nT
 
 
-def test_temperature_driven_scale_factor_keeps_the_network(authorities: object) -> None:
-    from pathlib import Path
-
-    text = (Path(str(authorities)) / "swarm_iss_real_tles.tle").read_text()
-    tle = select_tle(text, norad_id=39452)
-    orbit = Orbit.from_tle(f"{tle.name}\n{tle.line1}\n{tle.line2}")
-    world = simulate_world(
-        tle,
-        start_utc_s=orbit.epoch_utc_s,
-        duration_s=20_000.0,
-        cadence_s=10.0,
-        rng=np.random.default_rng(7),
-        attitude=attitude_profile("tumbling"),
-        sensor=SensorModel.random(rng=np.random.default_rng(8), noise_std_nt=2.0),
-        effects=[make_effect("temperature"), make_effect("magnetorquer")],
-    )
+def test_temperature_driven_scale_factor_keeps_the_network(
+    swarm_a_temperature_world: tuple[World, Orbit],  # tests/conftest.py
+) -> None:
+    world, orbit = swarm_a_temperature_world
     rms_lin, _ = _holdout(world.telemetry, orbit, "linear-hk")
     rms_net, training = _holdout(world.telemetry, orbit, "lmbp-hk")
     assert str(training["hidden_layer"]).startswith("kept")

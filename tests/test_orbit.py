@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from sgp4.api import Satrec
 from sgp4.exporter import export_omm
+from shared_worlds import REAL_TLES_FILE
 
 from orbitcal import frames
 from orbitcal.errors import OrbitProblemError
@@ -259,7 +260,7 @@ def test_orbit_pickles_and_writes_its_tle() -> None:
 
 # --- one parser for TLE and OMM files; physical validation (issue 10 item 4, issue 11 item 7) ----
 
-REAL_TLES = Path(__file__).resolve().parent / "authorities" / "swarm_iss_real_tles.tle"
+REAL_TLES = REAL_TLES_FILE  # tests/shared_worlds.py
 
 
 def _swarm_a_omm() -> dict[str, str]:

@@ -4,7 +4,6 @@ later blocks. Telemetry has no positions, so truth comes from the TLE like in op
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,6 +13,7 @@ from orbitcal.calibrate.document import REQUIRED_KEYS
 from orbitcal.orbit import Orbit
 from orbitcal.pipeline import apply_document, calibrate_telemetry
 from orbitcal.reproduce.onorbit import OrbitWorld, orbit_world
+from orbitcal.simulate.world import World
 from orbitcal.telemetry import Telemetry
 
 SIGMA_NT = 5.0
@@ -126,29 +126,13 @@ def test_scalar_method_without_attitude_and_vector_method_refuses(clean_world: O
 
 
 def test_lmbp_beats_linear_regressors_on_the_simulators_temperature_scale_drift(
-    authorities: Path,
+    swarm_a_temperature_world: tuple[World, Orbit],  # tests/conftest.py
 ) -> None:
     """orbitcal.simulate's temperature effect drifts the scale factor too (dB = k_b ΔT +
     k_s ⊙ B ΔT): a product that additive regressors cannot represent and the network with
     housekeeping inputs learns. Built with the project's simulator on the real Swarm A TLE."""
-    from orbitcal.sensor import SensorModel
-    from orbitcal.simulate import attitude_profile, make_effect, simulate_world
-    from orbitcal.simulate.world import select_tle
-
-    tle = select_tle((authorities / "swarm_iss_real_tles.tle").read_text(), norad_id=39452)
-    text = f"{tle.name}\n{tle.line1}\n{tle.line2}"
-    orbit = Orbit.from_tle(text)
-    sigma = 2.0
-    world = simulate_world(
-        tle,
-        start_utc_s=orbit.epoch_utc_s,
-        duration_s=20_000.0,
-        cadence_s=10.0,
-        rng=np.random.default_rng(7),
-        attitude=attitude_profile("tumbling"),
-        sensor=SensorModel.random(rng=np.random.default_rng(8), noise_std_nt=sigma),
-        effects=[make_effect("temperature"), make_effect("magnetorquer")],
-    )
+    world, orbit = swarm_a_temperature_world
+    sigma = 2.0  # the world's sensor noise per axis [nT]
     h = {}
     for method in ("linear-hk", "lmbp-hk"):
         _, doc = calibrate_telemetry(

@@ -19,7 +19,6 @@ def test_the_tutorial_has_code() -> None:
     assert len(_blocks()) >= 6
 
 
-@pytest.mark.slow
 def test_the_tutorial_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.chdir(tmp_path)
     namespace: dict[str, object] = {"__name__": "tutorial"}

@@ -16,15 +16,13 @@ from typing import Any
 import numpy as np
 import pandas as pd
 from scipy.spatial.transform import Rotation
+from shared_worlds import SWARM_A_2022_TLE
 
 from orbitcal.orbit import Orbit
 from orbitcal.truth import truth_body_nt
 
-#: Swarm A (NORAD 39452), CelesTrak, epoch 2022-08-01T12:28Z (tests/authorities/README.md).
-SWARM_A_TLE = (
-    "1 39452U 13067B   22213.51971877  .00001645  00000+0  50768-4 0  9990\n"
-    "2 39452  87.3611 208.4349 0002354 100.1496 260.0021 15.32769581488835"
-)
+#: Swarm A (NORAD 39452), CelesTrak, epoch 2022-08-01T12:28Z (tests/shared_worlds.py).
+SWARM_A_TLE = SWARM_A_2022_TLE
 
 T0_UTC_S = 1_659_312_000.0  # 2022-08-01T00:00:00Z
 

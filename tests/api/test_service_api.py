@@ -14,6 +14,7 @@ import pandas as pd
 import pytest
 from service_helpers import ADMIN_KEY, LiveServer, live_server, sqlite_settings
 from service_worlds import T0_UTC_S, world
+from shared_worlds import SWARM_A_2022_OMM
 
 from orbitcal import ccsds
 from service.app import create_app
@@ -281,25 +282,7 @@ def test_settings_come_from_the_environment(monkeypatch: pytest.MonkeyPatch) -> 
     assert json.dumps(s.model_dump(mode="json")).count("k" * 40) == 0
 
 
-SWARM_A_OMM = {  # the same element set as service_worlds.SWARM_A_TLE, CelesTrak JSON OMM keys
-    "OBJECT_NAME": "SWARM A",
-    "OBJECT_ID": "2013-067B",
-    "EPOCH": "2022-08-01T12:28:23.701728",
-    "MEAN_MOTION": 15.32769581,
-    "ECCENTRICITY": 0.0002354,
-    "INCLINATION": 87.3611,
-    "RA_OF_ASC_NODE": 208.4349,
-    "ARG_OF_PERICENTER": 100.1496,
-    "MEAN_ANOMALY": 260.0021,
-    "EPHEMERIS_TYPE": 0,
-    "CLASSIFICATION_TYPE": "U",
-    "NORAD_CAT_ID": 39452,
-    "ELEMENT_SET_NO": 999,
-    "REV_AT_EPOCH": 48883,
-    "BSTAR": 5.0768e-05,
-    "MEAN_MOTION_DOT": 1.645e-05,
-    "MEAN_MOTION_DDOT": 0.0,
-}
+SWARM_A_OMM = SWARM_A_2022_OMM  # the same element set as service_worlds.SWARM_A_TLE
 
 
 def test_orbit_is_set_by_tle_or_omm_and_validated(server: LiveServer) -> None:

@@ -13,17 +13,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 from service_helpers import live_server, sqlite_settings, wait_job
+from shared_worlds import REAL_TLES_FILE
 
 from orbitcal.diagnose.effects import EFFECT_NAMES
 from orbitcal.simulate import make_effect, simulate_world
 from orbitcal.timescales import iso_to_utc_s
 
-TLE_FILE = Path(__file__).resolve().parents[1] / "authorities" / "swarm_iss_real_tles.tle"
 
-
+@pytest.mark.slow  # 46 s measured (load 5, 2 cores)
 def test_diagnosis_over_http_names_the_injected_magnetorquer_coupling(tmp_path: Path) -> None:
     world = simulate_world(
-        TLE_FILE.read_text(),
+        REAL_TLES_FILE.read_text(),
         norad_id=39452,
         start_utc_s=float(iso_to_utc_s(["2022-08-02T00:00:00Z"])[0]),
         duration_s=6 * 3600.0,

@@ -71,6 +71,7 @@ def celery_worker(
             proc.wait(timeout=10)
 
 
+@pytest.mark.slow  # 28 s per broker measured (load 5, 2 cores)
 @pytest.mark.parametrize("broker", sorted(BROKERS))
 def test_end_to_end_on_postgresql_with_celery(broker: str, tmp_path: Path) -> None:
     name, port, broker_url = BROKERS[broker]

@@ -26,6 +26,7 @@ from typing import Any
 import httpx
 import numpy as np
 import uvicorn
+from shared_worlds import SWARM_A_2022_TLE
 
 from service.app import create_app
 from service.settings import Settings
@@ -35,11 +36,8 @@ REPO = HERE.parents[1]
 ADMIN_KEY = "rel-admin-" + uuid.uuid4().hex
 #: 2022-08-01T00:00:00Z: inside IGRF-14's definitive span and the Swarm A TLE's epoch.
 T0_UTC_S = 1_659_312_000.0
-#: Swarm A (NORAD 39452), CelesTrak, epoch 2022-08-01 (tests/authorities/swarm_iss_real_tles.tle).
-SWARM_A_TLE = (
-    "1 39452U 13067B   22213.51971877  .00001645  00000+0  50768-4 0  9990\n"
-    "2 39452  87.3611 208.4349 0002354 100.1496 260.0021 15.32769581488835"
-)
+#: Swarm A (NORAD 39452), CelesTrak, epoch 2022-08-01 (tests/shared_worlds.py).
+SWARM_A_TLE = SWARM_A_2022_TLE
 CSV = {"content-type": "text/csv"}
 
 

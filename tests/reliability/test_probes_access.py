@@ -21,6 +21,7 @@ import pytest
 import sqlalchemy as sa
 from probes import RESULTS, Probe, ProbeResult, ServeProcess, serve_process
 from reliability_helpers import ADMIN_KEY, SWARM_A_TLE, T0_UTC_S, csv_batch, physical_csv
+from shared_worlds import SWARM_A_2022_OMM
 
 CSV = {"content-type": "text/csv"}
 JSON = {"content-type": "application/json"}
@@ -236,24 +237,7 @@ def test_unknown_method(server: ServeProcess, probe: Probe) -> None:
 
 # --- orbit: unphysical OMM elements are 422s naming the field ----------------------------------
 
-OMM = {
-    "OBJECT_NAME": "SWARM A",
-    "NORAD_CAT_ID": 39452,
-    "EPOCH": "2022-08-01T12:28:23.442",
-    "MEAN_MOTION": 15.32769581,
-    "ECCENTRICITY": 0.0002354,
-    "INCLINATION": 87.3611,
-    "RA_OF_ASC_NODE": 208.4349,
-    "ARG_OF_PERICENTER": 100.1496,
-    "MEAN_ANOMALY": 260.0021,
-    "BSTAR": 5.0768e-05,
-    "MEAN_MOTION_DOT": 1.645e-05,
-    "MEAN_MOTION_DDOT": 0,
-    "ELEMENT_SET_NO": 999,
-    "REV_AT_EPOCH": 48883,
-    "EPHEMERIS_TYPE": 0,
-    "CLASSIFICATION_TYPE": "U",
-}
+OMM = SWARM_A_2022_OMM  # tests/shared_worlds.py
 
 
 def _orbit_unchanged(server: ServeProcess, sc: str, r: httpx.Response) -> None:

@@ -21,31 +21,14 @@ import pytest
 import sqlalchemy as sa
 from probes import Probe, ServeProcess, serve_process
 from reliability_helpers import SWARM_A_TLE
+from shared_worlds import SWARM_A_2022_OMM
 
 from orbitcal.orbit import tle_checksum
 
 JSON = {"content-type": "application/json"}
 
-#: Swarm A (NORAD 39452), CelesTrak OMM of 2022-08-01 (the TLE of tests/authorities as OMM).
-OMM: dict[str, Any] = {
-    "OBJECT_NAME": "SWARM A",
-    "OBJECT_ID": "2013-067B",
-    "NORAD_CAT_ID": 39452,
-    "EPOCH": "2022-08-01T12:28:23.442",
-    "MEAN_MOTION": 15.32769581,
-    "ECCENTRICITY": 0.0002354,
-    "INCLINATION": 87.3611,
-    "RA_OF_ASC_NODE": 208.4349,
-    "ARG_OF_PERICENTER": 100.1496,
-    "MEAN_ANOMALY": 260.0021,
-    "BSTAR": 5.0768e-05,
-    "MEAN_MOTION_DOT": 1.645e-05,
-    "MEAN_MOTION_DDOT": 0,
-    "ELEMENT_SET_NO": 999,
-    "REV_AT_EPOCH": 48883,
-    "EPHEMERIS_TYPE": 0,
-    "CLASSIFICATION_TYPE": "U",
-}
+#: Swarm A (NORAD 39452), CelesTrak OMM of 2022-08-01 (tests/shared_worlds.py).
+OMM: dict[str, Any] = SWARM_A_2022_OMM
 
 #: (probe name, OMM keyword, value): each must be a 422 naming the keyword.
 BAD_OMM_VALUES: list[tuple[str, str, Any]] = [
