@@ -55,3 +55,18 @@ def test_lanes_and_single_samples_agree_for_mixed_pieces_and_models_of_any_order
         )
         np.testing.assert_allclose(mixed, numpy_path, rtol=0.0, atol=1e-8)
         np.testing.assert_allclose(in_lanes, mixed[order], rtol=0.0, atol=1e-9)
+
+
+def test_a_static_model_takes_the_linear_lanes_and_matches_numpy() -> None:
+    # LCS-1 (degree 185, one piece, order 1) runs in the order-2 lanes with a zero slope.
+    field = get_field("LCS-1")
+    rng = np.random.default_rng(2)
+    n = 2 * _kernel.LANES + 5
+    t = 1.6e9 + np.arange(n) * 10.0
+    radius = 6371.2 + rng.uniform(300.0, 800.0, n)
+    colat = rng.uniform(0.0, 180.0, n)
+    lon = rng.uniform(-180.0, 180.0, n)
+    numpy_path = field.evaluate(t, radius, colat, lon, backend="numpy")
+    numba_path = field.evaluate(t, radius, colat, lon, backend="numba")
+    assert np.abs(numpy_path).max() > 1.0
+    np.testing.assert_allclose(numba_path, numpy_path, rtol=0.0, atol=1e-9)

@@ -6,14 +6,15 @@
 
    synth_lanes: the same algorithm as the kernel. For each order m the degree recursion of the
    Schmidt functions keeps its two previous terms in registers and each term is summed at once;
-   samples that share a model piece are taken LANES at a time (loops over lanes vectorise), the
-   others one at a time. Coefficients in the kernel's order-major layout (P, K, order).
+   samples that share a model piece are taken LANES at a time (loops over lanes vectorise; for a
+   model linear in time, one loop per (n, m) with (a/r)^(n+2) carried by the Legendre functions),
+   the others one at a time. Coefficients in the kernel's order-major layout (P, K, order).
 
    synth_rows: the previous algorithm (per sample: Horner for all coefficients into a buffer,
    P and dP/dtheta stored row by row, then summed per degree). Degree-block layout (order, P, K). */
 
 #define LANES 32
-enum { X, S, CP, SP, CM, SM, PMM, DPMM, P1, P2, DP1, DP2, BR, BT, BP, D, AR, RM, RN, G, H, NROWS };
+enum { X, S, CP, SP, CM, SM, PMM, DPMM, P1, P2, DP1, DP2, BR, BT, BP, D, AR, RM, RN, G, H, XA, SA, AR2, NROWS };
 
 static void sample(const double *restrict ppm, int order, int K, long j, double d, double radius,
                    double colat, double lon, int nmin, int nmax, const double *restrict ab,
@@ -138,6 +139,64 @@ static void block(const double *restrict ppm, int order, int K, long j, const do
   }
 }
 
+/* Order 2 (linear in time within a piece): one loop over lanes per (n, m) for the recursion, the
+   coefficients and the sums; the Legendre functions carry (a/r)^(n+2). */
+static void block_linear(const double *restrict ppm, int K, long j, const double *restrict dt,
+                         const double *restrict radius, const double *restrict colat,
+                         const double *restrict lon, int nmin, int nmax, const double *restrict ab,
+                         const double *restrict d_c, double *restrict out) {
+  double v[NROWS][LANES];
+  const double *c = ppm + j * K * 2;
+  for (int b = 0; b < LANES; b++) {
+    double th = colat[b] < 1e-9 ? 1e-9 : colat[b];
+    if (th > M_PI - 1e-9) th = M_PI - 1e-9;
+    double ar = 6371.2 / radius[b], s = sin(th);
+    v[D][b] = dt[b]; v[S][b] = s; v[XA][b] = cos(th) * ar; v[SA][b] = s * ar; v[AR2][b] = ar * ar;
+    v[CP][b] = cos(lon[b]); v[SP][b] = sin(lon[b]); v[CM][b] = 1; v[SM][b] = 0;
+    v[PMM][b] = ar * ar; v[DPMM][b] = 0; v[BR][b] = 0; v[BT][b] = 0; v[BP][b] = 0;
+  }
+  int k = 0, q = 0;
+  for (int m = 0; m <= nmax; m++) {
+    double fm = m;
+    if (m >= 1) {
+      double dm = d_c[m], use = m >= nmin ? 1.0 : 0.0, f1 = m + 1;
+      double g0 = c[2 * k] * use, g1 = c[2 * k + 1] * use, h0 = c[2 * k + 2] * use, h1 = c[2 * k + 3] * use;
+      for (int b = 0; b < LANES; b++) {
+        double xa = v[XA][b], sa = v[SA][b], pmm = v[PMM][b];
+        double dpmm = dm * (sa * v[DPMM][b] + xa * pmm);
+        pmm = dm * sa * pmm;
+        v[DPMM][b] = dpmm; v[PMM][b] = pmm;
+        double cm0 = v[CM][b], sm0 = v[SM][b];
+        double cm = cm0 * v[CP][b] - sm0 * v[SP][b], sm = sm0 * v[CP][b] + cm0 * v[SP][b];
+        v[CM][b] = cm; v[SM][b] = sm;
+        double g = g0 * v[D][b] + g1, h = h0 * v[D][b] + h1;
+        double t1 = g * cm + h * sm, t2 = fm * (h * cm - g * sm);
+        v[BR][b] += f1 * pmm * t1; v[BT][b] -= dpmm * t1; v[BP][b] -= pmm * t2;
+      }
+      k += 2;
+    }
+    for (int b = 0; b < LANES; b++) { v[P1][b] = v[PMM][b]; v[DP1][b] = v[DPMM][b]; v[P2][b] = 0; v[DP2][b] = 0; }
+    for (int n = m + 1; n <= nmax; n++) {
+      double a = ab[2 * q], bb = ab[2 * q + 1], use = n >= nmin ? 1.0 : 0.0, f1 = n + 1;
+      q++;
+      double g0 = c[2 * k] * use, g1 = c[2 * k + 1] * use, h0 = c[2 * k + 2] * use, h1 = c[2 * k + 3] * use;
+      for (int b = 0; b < LANES; b++) {
+        double xa = v[XA][b], p1 = v[P1][b], dp1 = v[DP1][b], bb_ar2 = bb * v[AR2][b];
+        double p = a * xa * p1 - bb_ar2 * v[P2][b];
+        double dp = a * (xa * dp1 - v[SA][b] * p1) - bb_ar2 * v[DP2][b];
+        v[P2][b] = p1; v[P1][b] = p; v[DP2][b] = dp1; v[DP1][b] = dp;
+        double g = g0 * v[D][b] + g1, h = h0 * v[D][b] + h1, cm = v[CM][b], sm = v[SM][b];
+        double t1 = g * cm + h * sm, t2 = fm * (h * cm - g * sm);
+        v[BR][b] += f1 * p * t1; v[BT][b] -= dp * t1; v[BP][b] -= p * t2;
+      }
+      k += 2;
+    }
+  }
+  for (int b = 0; b < LANES; b++) {
+    out[3 * b] += -v[BT][b]; out[3 * b + 1] += v[BP][b] / v[S][b]; out[3 * b + 2] += -v[BR][b];
+  }
+}
+
 void synth_lanes(const double *ppm, int order, int K, const long *piece, const double *dt,
                  const double *radius, const double *colat, const double *lon, int nmin, int nmax,
                  const double *ab, const double *d_c, long start, long stop, double *out) {
@@ -146,7 +205,9 @@ void synth_lanes(const double *ppm, int order, int K, const long *piece, const d
     long j = piece[i0];
     int same = 1;
     for (long i = i0 + 1; i < i0 + LANES; i++) same &= piece[i] == j;
-    if (same)
+    if (same && order == 2)
+      block_linear(ppm, K, j, dt + i0, radius + i0, colat + i0, lon + i0, nmin, nmax, ab, d_c, out + 3 * i0);
+    else if (same)
       block(ppm, order, K, j, dt + i0, radius + i0, colat + i0, lon + i0, nmin, nmax, ab, d_c, out + 3 * i0);
     else
       for (long i = i0; i < i0 + LANES; i++)

@@ -10,8 +10,11 @@ from a copy of the coefficients in the same order-major sequence as the loops re
 
 Samples are taken :data:`LANES` at a time when they share a piece of the model (the usual case for
 a time series): the lanes' state lives in the rows of one small array, so the loops over lanes are
-independent and the compiler turns them into SIMD instructions. Other samples (mixed pieces, the
-tail of a range) go one by one through the same arithmetic. No array grows with the number of
+independent and the compiler turns them into SIMD instructions. For a model linear in time within
+a piece (IGRF; static models get a zero slope) one loop over lanes per ``(n, m)`` term does the
+recursion, the coefficients and the sums, with the radial factor carried by the Legendre
+functions. Other samples (mixed pieces, the tail of a range) go one by one through the same
+arithmetic. No array grows with the number of
 samples except the output. ``HAVE_NUMBA`` is False when Numba cannot be imported; the numpy path
 is then used.
 """
@@ -47,7 +50,7 @@ LANES = 32
 
 # Rows of the per-block lane state (one array, so that the compiler sees disjoint rows).
 _X, _S, _CP, _SP, _CM, _SM, _PMM, _DPMM, _P1, _P2, _DP1, _DP2 = range(12)
-_BR, _BT, _BP, _D, _AR, _RM, _RN, _G, _H, _N_ROWS = range(12, 22)
+_BR, _BT, _BP, _D, _AR, _RM, _RN, _G, _H, _XA, _SA, _AR2, _N_ROWS = range(12, 25)
 
 
 @lru_cache(maxsize=8)
@@ -76,10 +79,14 @@ def order_major(pp_blocks: NDArray[np.float64], nmax: int) -> NDArray[np.float64
 
     Returns
     -------
-    ndarray, shape (P, K, order)
-        ``[piece, 2 j + (0: g, 1: h), power]`` for the ``j``-th ``(m, n)`` pair, ``m`` outer.
+    ndarray, shape (P, K, max(order, 2))
+        ``[piece, 2 j + (0: g, 1: h), power]`` for the ``j``-th ``(m, n)`` pair, ``m`` outer;
+        highest power first. A static model (order 1) gets a zero slope, so that it takes the
+        kernel's linear-in-time path (``0 * dt + g`` is exactly ``g``).
     """
     picked = np.asarray(pp_blocks, dtype=np.float64)[:, :, _order_major_index(nmax)]
+    if picked.shape[0] == 1:
+        picked = np.concatenate([np.zeros_like(picked), picked])
     return np.ascontiguousarray(np.transpose(picked, (1, 2, 0)))
 
 
@@ -320,6 +327,123 @@ def _block(
         out[i, 2] += -v[_BR, b]
 
 
+def _block_linear(
+    ppm: NDArray[np.float64],
+    j: int,
+    dt: NDArray[np.float64],
+    radius_km: NDArray[np.float64],
+    colat_rad: NDArray[np.float64],
+    lon_rad: NDArray[np.float64],
+    nmin: int,
+    nmax: int,
+    ab: NDArray[np.float64],
+    d_c: NDArray[np.float64],
+    i0: int,
+    v: NDArray[np.float64],
+    out: NDArray[np.float64],
+) -> None:
+    """:func:`_block` for a model linear in time within a piece (order 2; IGRF, static models).
+
+    One loop over lanes per ``(n, m)`` does the recursion, the coefficients and the sums, and
+    the Legendre functions carry the radial factor: ``P~_nm = (a/r)^(n+2) P_nm`` obeys the
+    same recursion with ``cos θ, sin θ`` scaled by ``a/r`` and ``b_nm`` by ``(a/r)^2``.
+    """
+    for b in range(LANES):
+        i = i0 + b
+        v[_D, b] = dt[i]
+        theta = min(max(colat_rad[i], _POLE_EPS_RAD), math.pi - _POLE_EPS_RAD)
+        ar = _EARTH_REFERENCE_RADIUS_KM / radius_km[i]
+        s = math.sin(theta)
+        v[_S, b] = s
+        v[_XA, b] = math.cos(theta) * ar
+        v[_SA, b] = s * ar
+        v[_AR2, b] = ar * ar
+        v[_CP, b] = math.cos(lon_rad[i])
+        v[_SP, b] = math.sin(lon_rad[i])
+        v[_CM, b] = 1.0
+        v[_SM, b] = 0.0
+        v[_PMM, b] = ar * ar
+        v[_DPMM, b] = 0.0
+        v[_BR, b] = 0.0
+        v[_BT, b] = 0.0
+        v[_BP, b] = 0.0
+    k = 0
+    q = 0
+    for m in range(nmax + 1):
+        fm = float(m)
+        if m >= 1:
+            dm = d_c[m]
+            use = 1.0 if m >= nmin else 0.0
+            g0 = ppm[j, k, 0] * use
+            g1 = ppm[j, k, 1] * use
+            h0 = ppm[j, k + 1, 0] * use
+            h1 = ppm[j, k + 1, 1] * use
+            f1 = float(m + 1)
+            for b in range(LANES):
+                xa = v[_XA, b]
+                sa = v[_SA, b]
+                pmm = v[_PMM, b]
+                dpmm = dm * (sa * v[_DPMM, b] + xa * pmm)
+                pmm = dm * sa * pmm
+                v[_DPMM, b] = dpmm
+                v[_PMM, b] = pmm
+                cm0 = v[_CM, b]
+                sm0 = v[_SM, b]
+                cm = cm0 * v[_CP, b] - sm0 * v[_SP, b]
+                sm = sm0 * v[_CP, b] + cm0 * v[_SP, b]
+                v[_CM, b] = cm
+                v[_SM, b] = sm
+                g = g0 * v[_D, b] + g1
+                h = h0 * v[_D, b] + h1
+                t1 = g * cm + h * sm
+                t2 = fm * (h * cm - g * sm)
+                v[_BR, b] += f1 * pmm * t1
+                v[_BT, b] -= dpmm * t1
+                v[_BP, b] -= pmm * t2
+            k += 2
+        for b in range(LANES):
+            v[_P1, b] = v[_PMM, b]
+            v[_DP1, b] = v[_DPMM, b]
+            v[_P2, b] = 0.0
+            v[_DP2, b] = 0.0
+        for n in range(m + 1, nmax + 1):
+            a = ab[q, 0]
+            bb = ab[q, 1]
+            q += 1
+            use = 1.0 if n >= nmin else 0.0
+            g0 = ppm[j, k, 0] * use
+            g1 = ppm[j, k, 1] * use
+            h0 = ppm[j, k + 1, 0] * use
+            h1 = ppm[j, k + 1, 1] * use
+            f1 = float(n + 1)
+            for b in range(LANES):
+                xa = v[_XA, b]
+                p1 = v[_P1, b]
+                dp1 = v[_DP1, b]
+                bb_ar2 = bb * v[_AR2, b]
+                p = a * xa * p1 - bb_ar2 * v[_P2, b]
+                dp = a * (xa * dp1 - v[_SA, b] * p1) - bb_ar2 * v[_DP2, b]
+                v[_P2, b] = p1
+                v[_P1, b] = p
+                v[_DP2, b] = dp1
+                v[_DP1, b] = dp
+                g = g0 * v[_D, b] + g1
+                h = h0 * v[_D, b] + h1
+                cm = v[_CM, b]
+                sm = v[_SM, b]
+                t1 = g * cm + h * sm
+                t2 = fm * (h * cm - g * sm)
+                v[_BR, b] += f1 * p * t1
+                v[_BT, b] -= dp * t1
+                v[_BP, b] -= p * t2
+            k += 2
+    for b in range(LANES):
+        i = i0 + b
+        out[i, 0] += -v[_BT, b]
+        out[i, 1] += v[_BP, b] / v[_S, b]
+        out[i, 2] += -v[_BR, b]
+
+
 def _kernel_range(
     ppm: NDArray[np.float64],
     piece: NDArray[np.int64],
@@ -337,6 +461,7 @@ def _kernel_range(
 ) -> None:
     """Samples ``start:stop``: full blocks of one piece in lanes, the others one by one."""
     v = np.zeros((_N_ROWS, LANES))
+    linear = ppm.shape[2] == 2
     i0 = start
     while i0 + LANES <= stop:
         j = piece[i0]
@@ -345,7 +470,11 @@ def _kernel_range(
             if piece[i] != j:
                 same = False
                 break
-        if same:
+        if same and linear:
+            _block_linear_fn(
+                ppm, j, dt, radius_km, colat_rad, lon_rad, nmin, nmax, ab, d_c, i0, v, out
+            )
+        elif same:
             _block_fn(ppm, j, dt, radius_km, colat_rad, lon_rad, nmin, nmax, ab, d_c, i0, v, out)
         else:
             for i in range(i0, i0 + LANES):
@@ -410,6 +539,7 @@ def _kernel_parallel(
 _prange: Any = range
 _sample_fn: Any = _sample
 _block_fn: Any = _block
+_block_linear_fn: Any = _block_linear
 _range_fn: Any = _kernel_range
 _compiled: Any = None
 _compiled_parallel: Any = None
@@ -429,7 +559,9 @@ if HAVE_NUMBA:
             )(fn)
 
     _sample_fn = _jit(_sample)
+    # inlined in Numba's IR: as a call of its own the block compiles to slower code (measured)
     _block_fn = _jit(_block, inline="always")
+    _block_linear_fn = _jit(_block_linear, inline="always")
     _range_fn = _jit(_kernel_range)
     _compiled = _jit(_kernel_serial)
     _compiled_parallel = _jit(_kernel_parallel, parallel=True)
