@@ -67,19 +67,84 @@ def rotation_itrs_to_body(
     return np.asarray(np.einsum("nij,nkj->nik", frame_to_body, gcrs_to_itrs))
 
 
-def _field_body(
-    name: str, t: FloatArray, r_itrs_km: FloatArray, rot: FloatArray
-) -> FloatArray | None:
+#: Largest time between the samples at which the crustal model is evaluated [s]; between them
+#: the field is interpolated along the track (cubic spline of the ITRS components in time, per
+#: contiguous stretch). Its shortest wavelengths at orbit height are hundreds of km: on the
+#: one-day 1 Hz Swarm A world (LCS-1 to degree 185, 86,400 samples) a 10 s spacing (76 km)
+#: interpolates to 6.5e-5 nT rms and 2.5e-3 nT at worst, against a crustal field of 2.5 nT rms
+#: and sensor noise of 0.1 nT and more (``benchmarks/results/diagnose_timing.md``), with a tenth
+#: of the evaluations.
+CRUST_KNOT_SPACING_S = 10.0
+
+
+def _field_itrs(name: str, t: FloatArray, r_itrs_km: FloatArray) -> FloatArray:
     from orbitcal import frames
     from orbitcal.field import get_field
 
+    radius, colat, lon = frames.itrs_to_spherical(r_itrs_km)
+    b_nec = get_field(name).b_nec_nt(t, radius, colat, lon)
+    return np.asarray(frames.nec_to_itrs(b_nec, r_itrs_km))
+
+
+def _field_itrs_along_track(
+    name: str, t: FloatArray, r_itrs_km: FloatArray, spacing_s: float
+) -> FloatArray:
+    """The field at every sample from evaluations at most ``spacing_s`` apart, interpolated.
+
+    Knots are the first sample of every ``spacing_s`` bin of each stretch without a gap longer
+    than ``spacing_s``, and its last sample; a stretch of fewer than four knots, or data no
+    denser than the knots, are evaluated at every sample.
+    """
+    from scipy.interpolate import CubicSpline
+
+    n = t.shape[0]
+    starts = np.r_[0, np.flatnonzero(np.diff(t) > spacing_s) + 1]
+    stops = np.r_[starts[1:], n]
+    seg = np.repeat(np.arange(starts.size), stops - starts)
+    bin_ = np.floor((t - t[starts][seg]) / spacing_s).astype(np.int64)
+    first = np.r_[True, (seg[1:] != seg[:-1]) | (bin_[1:] != bin_[:-1])]
+    last = np.r_[seg[1:] != seg[:-1], True]
+    knot = first | last
+    if int(knot.sum()) * 2 > n:
+        return _field_itrs(name, t, r_itrs_km)
+    # Stretches with fewer than four knots are evaluated at every sample.
+    knots_per_seg = np.bincount(seg, weights=knot, minlength=starts.size)
+    dense = knots_per_seg[seg] < 4
+    at = knot | dense
+    values = _field_itrs(name, t[at], r_itrs_km[at])
+    out = np.empty((n, 3))
+    out[at] = values
+    where = np.flatnonzero(at)
+    for a, b in zip(starts, stops, strict=True):
+        if knots_per_seg[seg[a]] < 4:
+            continue
+        k = where[(where >= a) & (where < b)]
+        spline = CubicSpline(t[k] - t[a], out[k], axis=0)
+        out[a:b] = spline(t[a:b] - t[a])
+    return out
+
+
+def _field_body(
+    name: str,
+    t: FloatArray,
+    r_itrs_km: FloatArray,
+    rot: FloatArray,
+    *,
+    knot_spacing_s: float | None = None,
+) -> FloatArray | None:
+    """The field model ``name`` in body axes at every sample [nT], shape (N, 3).
+
+    With ``knot_spacing_s`` it is evaluated at most that far apart in time and interpolated
+    along the track (:func:`_field_itrs_along_track`).
+    """
     try:
-        radius, colat, lon = frames.itrs_to_spherical(r_itrs_km)
-        b_nec = get_field(name).b_nec_nt(t, radius, colat, lon)
+        if knot_spacing_s is None:
+            b_itrs = _field_itrs(name, t, r_itrs_km)
+        else:
+            b_itrs = _field_itrs_along_track(name, t, r_itrs_km, knot_spacing_s)
     except ValueError as exc:  # FieldRangeError: outside the model's span
         warnings.warn(f"{name} not used as a candidate regressor: {exc}", stacklevel=3)
         return None
-    b_itrs = frames.nec_to_itrs(b_nec, r_itrs_km)
     return np.asarray(np.einsum("nij,nj->ni", rot, b_itrs))
 
 
@@ -163,7 +228,11 @@ def diagnosis_data(
             b_ext_body = _field_body("RC", t, r_itrs, rot)
         except ValueError as exc:
             warnings.warn(f"RC index not used: {exc}", stacklevel=2)
-    b_crust_body = _field_body(crust_model, t, r_itrs, rot) if crust_model else None
+    b_crust_body = (
+        _field_body(crust_model, t, r_itrs, rot, knot_spacing_s=CRUST_KNOT_SPACING_S)
+        if crust_model
+        else None
+    )
     return DiagnosisData(
         t_utc_s=t,
         b_raw_nt=np.asarray(telemetry.b_raw_nt, dtype=float),
