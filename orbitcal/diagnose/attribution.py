@@ -1490,17 +1490,19 @@ def _regional_fac(
     idx = np.flatnonzero(hi)
     mlat_hi = data.mlat_deg[idx]
     transverse_hi = data.transverse_body[idx]
-    cols = []
+    bumps = []
     for sign in (1.0, -1.0):
         for c in FAC_CENTRES_DEG:
             bump = np.exp(-0.5 * ((sign * mlat_hi - c) / FAC_WIDTH_DEG) ** 2)
             if float(np.max(bump, initial=0.0)) < 0.05:
                 continue
-            for k in range(2):
-                cols.append(transverse_hi[:, k, :] * bump[:, None])
-    if not cols:
+            bumps.append(bump)
+    if not bumps:
         return None
-    g_hi = np.stack(cols, axis=2)
+    g_hi = np.empty((idx.size, 3, 2 * len(bumps)))
+    for j, bump in enumerate(bumps):
+        for k in range(2):
+            np.multiply(transverse_hi[:, k, :], bump[:, None], out=g_hi[:, :, 2 * j + k])
     b_hat = data.b_hat_body
     par = np.sum(r_now * b_hat, axis=1)
     perp = r_now - par[:, None] * b_hat

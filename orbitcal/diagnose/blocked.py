@@ -13,6 +13,7 @@ those of the dense matrix up to the order of the floating-point sums.
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Iterator, Sequence
 
 import numpy as np
@@ -28,6 +29,42 @@ IntArray = npt.NDArray[np.intp]
 #: Samples per block: the rows of one block, ``3 x FIT_BLOCK_SAMPLES x p x 8`` bytes (1.5 MB at
 #: p = 24), stay in the cache while their products are formed.
 FIT_BLOCK_SAMPLES = 2048
+
+
+def _effect_scales(data: DiagnosisData, block: DesignBlock, g: FloatArray) -> FloatArray:
+    """Scales of one design block's columns, (p,); computed once per block and data set.
+
+    Effect columns are scaled by the part the calibration cannot absorb, so the ridge acts on
+    what the data can tell apart (a time offset under a steady spin is mostly absorbed): the root
+    mean square of each column after projection on the 12 calibration columns (their orthonormal
+    basis, factorised once per data set). A column the calibration absorbs whole (the radial
+    gradient of a pure dipole is -3B/r) keeps a floor of 1e-6 of its plain root mean square, so
+    that the normal equations stay invertible. A column's scale depends on that column only, so
+    it is kept with the block (a frozen dataclass: stored beside its fields) for every fit.
+    """
+    cache: dict[int, tuple[weakref.ref[DiagnosisData], FloatArray]]
+    cache = block.__dict__.setdefault("_scale_cache", {})
+    hit = cache.get(id(data))
+    if hit is not None and hit[0]() is data:
+        return hit[1]
+    n_rows = 3 * data.n
+    q = g.shape[2]
+    q_cal = data.calibration_q
+    step = FIT_BLOCK_SAMPLES
+    sum_sq = np.zeros(q)
+    q_eff = np.zeros((12, q))
+    for a in range(0, data.n, step):
+        eff = g[a : a + step].reshape(-1, q)
+        sum_sq += np.sum(eff**2, axis=0)
+        q_eff += q_cal[3 * a : 3 * a + eff.shape[0]].T @ eff
+    rest_sq = np.zeros(q)
+    for a in range(0, data.n, step):
+        eff = g[a : a + step].reshape(-1, q)
+        rest_sq += np.sum((eff - q_cal[3 * a : 3 * a + eff.shape[0]] @ q_eff) ** 2, axis=0)
+    raw = np.sqrt(sum_sq / n_rows)
+    scale = np.maximum(np.sqrt(rest_sq / n_rows), 1e-6 * raw)
+    cache[id(data)] = (weakref.ref(data), scale)
+    return scale
 
 
 class BlockedDesign:
@@ -84,7 +121,9 @@ class BlockedDesign:
 
     def rows(self, index: IntArray | slice) -> FloatArray:
         """Unit-scaled rows of the samples ``index``, shape (3 m, p)."""
-        return self.raw_rows(index) / self.scale
+        x = self.raw_rows(index)
+        x /= self.scale
+        return x
 
     def chunks(self, index: IntArray) -> Iterator[tuple[IntArray, slice]]:
         """Blocks of the samples ``index`` and the slice of their rows in ``3 index.size`` rows."""
@@ -97,29 +136,15 @@ class BlockedDesign:
             yield slice(start, min(start + self.block_samples, self.data.n))
 
     def _column_scales(self) -> FloatArray:
-        n_rows = 3 * self.data.n
-        sum_sq = np.zeros(self.p)
-        q_eff = np.zeros((12, self.p - 12))
-        q_cal = self.data.calibration_q if self.p > 12 else None
-        for sl in self._all_slices():
-            x = self.raw_rows(sl)
-            sum_sq += np.sum(x**2, axis=0)
-            if q_cal is not None:
-                q_eff += q_cal[3 * sl.start : 3 * sl.stop].T @ x[:, 12:]
-        scale = np.sqrt(sum_sq / n_rows)
-        if q_cal is not None:
-            # Effect columns are scaled by the part the calibration cannot absorb, so the ridge
-            # acts on what the data can tell apart (a time offset under a steady spin is mostly
-            # absorbed): the residual of each column after projection on the 12 calibration
-            # columns (their orthonormal basis, factorised once per data set).
-            raw = scale[12:].copy()
-            rest_sq = np.zeros(self.p - 12)
-            for sl in self._all_slices():
-                eff = self.raw_rows(sl)[:, 12:]
-                rest_sq += np.sum((eff - q_cal[3 * sl.start : 3 * sl.stop] @ q_eff) ** 2, axis=0)
-            # A column the calibration absorbs whole (the radial gradient of a pure dipole is
-            # -3B/r) keeps a floor, so that the normal equations stay invertible.
-            scale[12:] = np.maximum(np.sqrt(rest_sq / n_rows), 1e-6 * raw)
+        b = self.data.b_ref_body_nt / FIELD_SCALE_NT
+        # The calibration columns: b_j on one axis's rows and zero on the others (its root mean
+        # square over the 3N rows), then an offset of 1 on one axis's rows (sqrt(1/3)).
+        rms_b = np.sqrt(np.sum(b**2, axis=0) / (3 * self.data.n))
+        cal = np.r_[np.tile(rms_b, 3), np.full(3, np.sqrt(1.0 / 3.0))]
+        effects = [
+            _effect_scales(self.data, bl, g) for bl, g in zip(self.blocks, self._g, strict=True)
+        ]
+        scale = np.concatenate([cal, *effects])
         scale[scale == 0.0] = 1.0
         return scale
 

@@ -707,28 +707,45 @@ def _design_fac(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
     mlat = data.mlat_deg
     if not np.any(np.abs(mlat[train]) > FAC_MIN_MLAT_DEG):
         return None
-    east = data.transverse_body[:, 0, :]
-    phi = data.mlt_angle_rad
     # Region-1/2 currents reverse between dawn and dusk: each latitude bump is modulated by sin
     # and cos of the magnetic local time angle (when the Sun direction is known); two passes at
     # different local times are fitted exactly, and a constant term would be collinear with them.
-    mods = {"": np.ones(data.n)}
-    if phi is not None:
-        mods = {"_sin_mlt": np.sin(phi), "_cos_mlt": np.cos(phi)}
-    cols = []
+    mods = ("",) if data.mlt_angle_rad is None else ("_sin_mlt", "_cos_mlt")
+    bumps: list[tuple[float, float, str]] = []
     names = []
     for hemi, sign in (("n", 1.0), ("s", -1.0)):
         for c in FAC_CENTRES_DEG:
-            bump = np.exp(-0.5 * ((sign * mlat - c) / FAC_WIDTH_DEG) ** 2)
-            bump[sign * mlat < FAC_MIN_MLAT_DEG - 3 * FAC_WIDTH_DEG] = 0.0
+            bump = _fac_bump(mlat, sign, c)
             if float(np.max(bump[train], initial=0.0)) < 0.05:
                 continue
-            for suffix, m in mods.items():
-                cols.append(east * (bump * m)[:, None])
+            for suffix in mods:
+                bumps.append((sign, c, suffix))
                 names.append(f"east_{hemi}{c:.0f}{suffix}_nt")
-    if not cols:
+    if not bumps:
         return None
-    return DesignBlock(np.stack(cols, axis=2), names)
+    return DesignBlock(partial(_fac_columns, data, tuple(bumps)), names)
+
+
+def _fac_bump(mlat_deg: FloatArray, sign: float, centre_deg: float) -> FloatArray:
+    """A latitude bump of the field-aligned-current basis (zero equatorward of its range)."""
+    bump = np.exp(-0.5 * ((sign * mlat_deg - centre_deg) / FAC_WIDTH_DEG) ** 2)
+    bump[sign * mlat_deg < FAC_MIN_MLAT_DEG - 3 * FAC_WIDTH_DEG] = 0.0
+    return bump
+
+
+def _fac_columns(data: DiagnosisData, bumps: tuple[tuple[float, float, str], ...]) -> FloatArray:
+    """The field-aligned-current regressors, (N, 3, len(bumps)): built when a fit asks for them
+    (two dozen columns held for the whole attribution took 95 MB at 86,400 samples)."""
+    east = data.transverse_body[:, 0, :]
+    phi = data.mlt_angle_rad
+    mods = {} if phi is None else {"_sin_mlt": np.sin(phi), "_cos_mlt": np.cos(phi)}
+    g = np.empty((data.n, 3, len(bumps)))
+    for k, (sign, c, suffix) in enumerate(bumps):
+        w = _fac_bump(data.mlat_deg, sign, c)
+        if suffix in mods:
+            w = w * mods[suffix]
+        np.multiply(east, w[:, None], out=g[:, :, k])
+    return g
 
 
 #: Periods scanned for the attitude-error sinusoids [s] (log-spaced), and how many are kept.
@@ -783,15 +800,16 @@ def _design_attitude(data: DiagnosisData, train: BoolArray) -> DesignBlock | Non
     # columns are built only for the periods kept.
     m_rr = np.matmul(np.swapaxes(rt, 1, 2), rt).reshape(n_tr, 9)
 
-    def per_sample_k(q: FloatArray) -> FloatArray:
-        q3 = q.reshape(n_tr, 3, -1)
-        k = q3[:, 0, :, None] * rt[:, 0, None, :]
+    def per_sample_k(q3: FloatArray, a0: int, a1: int) -> FloatArray:
+        """K = Q^T R per sample of the block a0:a1, (a1 - a0, 3 q)."""
+        k = q3[a0:a1, 0, :, None] * rt[a0:a1, 0, None, :]
         for i in (1, 2):
-            k += q3[:, i, :, None] * rt[:, i, None, :]
-        return k.reshape(n_tr, -1)
+            k += q3[a0:a1, i, :, None] * rt[a0:a1, i, None, :]
+        return k.reshape(a1 - a0, -1)
 
-    def gains(periods_s: FloatArray, r_now: FloatArray, k_q: FloatArray) -> FloatArray:
-        n_q = k_q.shape[1] // 3
+    def gains(periods_s: FloatArray, r_now: FloatArray, q: FloatArray) -> FloatArray:
+        q3 = q.reshape(n_tr, 3, -1)
+        n_q = q3.shape[2]
         v = np.matmul(r_now.reshape(n_tr, 1, 3), rt)[:, 0, :]
         w = 2 * np.pi / np.asarray(periods_s, dtype=np.float64)
         p_n = w.size
@@ -802,7 +820,7 @@ def _design_attitude(data: DiagnosisData, train: BoolArray) -> DesignBlock | Non
             a1 = min(a0 + SCAN_BLOCK_SAMPLES, n_tr)
             phase = np.outer(w, tt[a0:a1])
             c, s_ = np.cos(phase), np.sin(phase)
-            m_blk, k_blk, v_blk = m_rr[a0:a1], k_q[a0:a1], v[a0:a1]
+            m_blk, k_blk, v_blk = m_rr[a0:a1], per_sample_k(q3, a0, a1), v[a0:a1]
             acc_m[0] += (c * c) @ m_blk
             acc_m[1] += (c * s_) @ m_blk
             acc_m[2] += (s_ * s_) @ m_blk
@@ -851,16 +869,17 @@ def _design_attitude(data: DiagnosisData, train: BoolArray) -> DesignBlock | Non
 
     for _ in range(ATTITUDE_MAX_TERMS):
         r_now = y - q_fixed @ (q_fixed.T @ y)
-        k_q = per_sample_k(q_fixed)
         free = np.array(
             [not any(abs(float(p) / c - 1.0) < 0.05 for c in chosen) for p in periods], bool
         )
-        best_gain, best_period = first_best(periods[free], gains(periods[free], r_now, k_q), 0.0)
+        best_gain, best_period = first_best(
+            periods[free], gains(periods[free], r_now, q_fixed), 0.0
+        )
         if best_gain <= 0.0:
             break
         # Refine the period on a fine grid (+-2.5 %): phase errors grow over the held-out span.
         fine = best_period * np.linspace(0.975, 1.025, 51)
-        g_fine, p_fine = first_best(fine, gains(fine, r_now, k_q), best_gain)
+        g_fine, p_fine = first_best(fine, gains(fine, r_now, q_fixed), best_gain)
         if p_fine:
             best_gain, best_period = g_fine, p_fine
         chosen.append(best_period)
@@ -885,21 +904,35 @@ def _design_attitude(data: DiagnosisData, train: BoolArray) -> DesignBlock | Non
             q_o = basis(others)
             r_now = y - q_o @ (q_o.T @ y)
             grid = chosen[j] * np.linspace(0.94, 1.06, 61)
-            _, p_best = first_best(grid, gains(grid, r_now, per_sample_k(q_o)), -1.0)
+            _, p_best = first_best(grid, gains(grid, r_now, q_o), -1.0)
             chosen[j] = p_best if p_best else chosen[j]
-    cols_all = []
-    names = []
-    for period in chosen:
-        w = 2 * np.pi / period
-        for fname, f in (("cos", np.cos(w * t)), ("sin", np.sin(w * t))):
-            for k, axis in enumerate("xyz"):
-                cols_all.append(rot[:, :, k] * f[:, None])
-                names.append(f"dtheta_{axis}_{fname}_{period:.0f}s_mrad")
+    names = [
+        f"dtheta_{axis}_{fname}_{period:.0f}s_mrad"
+        for period in chosen
+        for fname in ("cos", "sin")
+        for axis in "xyz"
+    ]
     return DesignBlock(
-        np.stack(cols_all, axis=2),
+        partial(_attitude_columns, data, float(data.t_utc_s[train][0]), tuple(chosen)),
         names,
         variant="periods_s=" + ",".join(f"{p:.0f}" for p in chosen),
     )
+
+
+def _attitude_columns(data: DiagnosisData, t0_s: float, periods_s: tuple[float, ...]) -> FloatArray:
+    """The attitude-error regressors of the periods kept, (N, 3, 6 x periods): built when a fit
+    asks for them instead of held for the whole attribution (memory grows with N)."""
+    t = data.t_utc_s - t0_s
+    rot = _rotation_columns(data) * 1e-3  # per mrad
+    g = np.empty((data.n, 3, 6 * len(periods_s)))
+    col = 0
+    for period in periods_s:
+        w = 2 * np.pi / period
+        for f in (np.cos(w * t), np.sin(w * t)):
+            for k in range(3):
+                np.multiply(rot[:, :, k], f[:, None], out=g[:, :, col])
+                col += 1
+    return g
 
 
 CATALOGUE: tuple[Effect, ...] = (
