@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 
-from orbitcal.diagnose.api import (
-    CRUST_KNOT_SPACING_S,
-    _field_itrs,
-    _field_itrs_along_track,
-)
+from orbitcal.diagnose.api import CRUST_KNOT_SPACING_S, _field_itrs
+from orbitcal.diagnose.track import along_track
+
+crust = partial(_field_itrs, "LCS-1")
 
 
 def _track(t_s: np.ndarray) -> np.ndarray:
@@ -27,8 +28,8 @@ def test_thinned_crust_matches_every_sample_far_below_the_noise() -> None:
         t, np.r_[300:340, 700:701, 1100:1497]
     )  # a 40 s gap, a dropped sample, a 3-sample stretch
     r = _track(t)
-    full = _field_itrs("LCS-1", t, r)
-    thin = _field_itrs_along_track("LCS-1", t, r, CRUST_KNOT_SPACING_S)
+    full = crust(t, r)
+    thin = along_track(crust, t, r, CRUST_KNOT_SPACING_S)
     assert float(np.sqrt(np.mean(full**2))) > 1.0  # a crust to interpolate
     err = np.abs(thin - full)
     assert float(err.max()) < 0.01  # nT; sensor noise is 0.1 nT and more
@@ -38,6 +39,4 @@ def test_thinned_crust_matches_every_sample_far_below_the_noise() -> None:
 def test_data_no_denser_than_the_knots_are_evaluated_at_every_sample() -> None:
     t = 1.6e9 + np.arange(0.0, 2000.0, 10.0)
     r = _track(t)
-    np.testing.assert_array_equal(
-        _field_itrs_along_track("LCS-1", t, r, CRUST_KNOT_SPACING_S), _field_itrs("LCS-1", t, r)
-    )
+    np.testing.assert_array_equal(along_track(crust, t, r, CRUST_KNOT_SPACING_S), crust(t, r))

@@ -11,6 +11,7 @@ returns the report.
 from __future__ import annotations
 
 import warnings
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -20,6 +21,7 @@ from orbitcal.diagnose.attribution import Attribution, attribute
 from orbitcal.diagnose.effects import DiagnosisData
 from orbitcal.diagnose.prior import CalibrationPrior
 from orbitcal.diagnose.report import build_report
+from orbitcal.diagnose.track import along_track
 from orbitcal.diagnose.where import where_analysis
 from orbitcal.errors import BadInputError
 
@@ -86,44 +88,6 @@ def _field_itrs(name: str, t: FloatArray, r_itrs_km: FloatArray) -> FloatArray:
     return np.asarray(frames.nec_to_itrs(b_nec, r_itrs_km))
 
 
-def _field_itrs_along_track(
-    name: str, t: FloatArray, r_itrs_km: FloatArray, spacing_s: float
-) -> FloatArray:
-    """The field at every sample from evaluations at most ``spacing_s`` apart, interpolated.
-
-    Knots are the first sample of every ``spacing_s`` bin of each stretch without a gap longer
-    than ``spacing_s``, and its last sample; a stretch of fewer than four knots, or data no
-    denser than the knots, are evaluated at every sample.
-    """
-    from scipy.interpolate import CubicSpline
-
-    n = t.shape[0]
-    starts = np.r_[0, np.flatnonzero(np.diff(t) > spacing_s) + 1]
-    stops = np.r_[starts[1:], n]
-    seg = np.repeat(np.arange(starts.size), stops - starts)
-    bin_ = np.floor((t - t[starts][seg]) / spacing_s).astype(np.int64)
-    first = np.r_[True, (seg[1:] != seg[:-1]) | (bin_[1:] != bin_[:-1])]
-    last = np.r_[seg[1:] != seg[:-1], True]
-    knot = first | last
-    if int(knot.sum()) * 2 > n:
-        return _field_itrs(name, t, r_itrs_km)
-    # Stretches with fewer than four knots are evaluated at every sample.
-    knots_per_seg = np.bincount(seg, weights=knot, minlength=starts.size)
-    dense = knots_per_seg[seg] < 4
-    at = knot | dense
-    values = _field_itrs(name, t[at], r_itrs_km[at])
-    out = np.empty((n, 3))
-    out[at] = values
-    where = np.flatnonzero(at)
-    for a, b in zip(starts, stops, strict=True):
-        if knots_per_seg[seg[a]] < 4:
-            continue
-        k = where[(where >= a) & (where < b)]
-        spline = CubicSpline(t[k] - t[a], out[k], axis=0)
-        out[a:b] = spline(t[a:b] - t[a])
-    return out
-
-
 def _field_body(
     name: str,
     t: FloatArray,
@@ -135,13 +99,13 @@ def _field_body(
     """The field model ``name`` in body axes at every sample [nT], shape (N, 3).
 
     With ``knot_spacing_s`` it is evaluated at most that far apart in time and interpolated
-    along the track (:func:`_field_itrs_along_track`).
+    along the track (:func:`orbitcal.diagnose.track.along_track`).
     """
     try:
         if knot_spacing_s is None:
             b_itrs = _field_itrs(name, t, r_itrs_km)
         else:
-            b_itrs = _field_itrs_along_track(name, t, r_itrs_km, knot_spacing_s)
+            b_itrs = along_track(partial(_field_itrs, name), t, r_itrs_km, knot_spacing_s)
     except ValueError as exc:  # FieldRangeError: outside the model's span
         warnings.warn(f"{name} not used as a candidate regressor: {exc}", stacklevel=3)
         return None

@@ -108,7 +108,8 @@ class BlockedDesign:
         """Unscaled rows of the samples ``index``, shape (3 m, p)."""
         b = self.data.b_ref_body_nt[index] / FIELD_SCALE_NT
         m = b.shape[0]
-        x = np.zeros((m, 3, self.p))
+        x = np.empty((m, 3, self.p))
+        x[:, :, :12] = 0.0
         for i in range(3):
             x[:, i, 3 * i : 3 * i + 3] = b
             x[:, i, 9 + i] = 1.0
@@ -125,11 +126,14 @@ class BlockedDesign:
         x /= self.scale
         return x
 
-    def chunks(self, index: IntArray) -> Iterator[tuple[IntArray, slice]]:
+    def chunks(self, index: IntArray) -> Iterator[tuple[IntArray | slice, slice]]:
         """Blocks of the samples ``index`` and the slice of their rows in ``3 index.size`` rows."""
+        contiguous = index.size > 0 and int(index[-1]) - int(index[0]) + 1 == index.size
         for start in range(0, index.size, self.block_samples):
             part = index[start : start + self.block_samples]
-            yield part, slice(3 * start, 3 * start + 3 * part.size)
+            rows = slice(3 * start, 3 * start + 3 * part.size)
+            # A run of consecutive samples (the training blocks) is read through views.
+            yield (slice(int(part[0]), int(part[-1]) + 1) if contiguous else part), rows
 
     def _all_slices(self) -> Iterator[slice]:
         for start in range(0, self.data.n, self.block_samples):

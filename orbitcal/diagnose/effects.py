@@ -31,6 +31,7 @@ import numpy as np
 import numpy.typing as npt
 
 from orbitcal.diagnose.prior import CalibrationPrior
+from orbitcal.diagnose.track import along_track
 from orbitcal.geomag import dipole_axis_itrs, magnetic_latitude_deg
 
 __all__ = [
@@ -90,6 +91,12 @@ def _time_derivative(t_s: FloatArray, y: FloatArray) -> FloatArray:
         elif n == 2:
             out[seg] = (y[seg][1] - y[seg][0]) / (t_s[seg][1] - t_s[seg][0])
     return out
+
+
+#: Largest time between the evaluations of the reference field's gradient along the track [s]
+#: (:attr:`DiagnosisData.db_ref_body_drtn_nt_km`); interpolated between them. The core field's
+#: gradient changes over thousands of km: at 10 s (76 km) the spline is exact to rounding.
+GRADIENT_KNOT_SPACING_S = 10.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -311,13 +318,26 @@ class DiagnosisData:
         normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
         along = np.cross(normal, radial)
         h_km = 5.0
+
+        def gradient_itrs(t: FloatArray, r_and_dirs: FloatArray) -> FloatArray:
+            pos, dirs = r_and_dirs[:, :3], r_and_dirs[:, 3:].reshape(-1, 3, 3)
+            out = np.empty((t.shape[0], 3, 3))
+            for k in range(3):
+                plus = np.asarray(field_fn(t, pos + h_km * dirs[:, k]))
+                minus = np.asarray(field_fn(t, pos - h_km * dirs[:, k]))
+                out[:, :, k] = (plus - minus) / (2.0 * h_km)
+            return out
+
+        # Evaluated every GRADIENT_KNOT_SPACING_S along the track and interpolated.
+        grad = along_track(
+            gradient_itrs,
+            self.t_utc_s,
+            np.column_stack([r, radial, along, normal]),
+            GRADIENT_KNOT_SPACING_S,
+        )
         out = np.empty((self.n, 3, 3))
-        for k, u in enumerate((radial, along, normal)):
-            plus = np.asarray(field_fn(self.t_utc_s, r + h_km * u))
-            minus = np.asarray(field_fn(self.t_utc_s, r - h_km * u))
-            out[:, :, k] = np.einsum(
-                "nij,nj->ni", self.rot_itrs_to_body, (plus - minus) / (2.0 * h_km)
-            )
+        for k in range(3):
+            out[:, :, k] = np.einsum("nij,nj->ni", self.rot_itrs_to_body, grad[:, :, k])
         return out
 
     @property
@@ -537,12 +557,11 @@ def _design_external(data: DiagnosisData, train: BoolArray) -> DesignBlock | Non
     # A storm's recovery phase: the ring-current field decays as exp(-t / tau) with tau of a few
     # to twenty hours (Burton et al. 1975: 7.7 h; O'Brien & McPherron 2000: 3-20 h), which a
     # linear trend extrapolates badly over the held-out blocks; tau from a grid, by training BIC.
-    t_rel_s = data.t_utc_s - float(data.t_utc_s[0])
+    # Built when the fit asks for them (held at once they grow with N: 290 MB at a week).
     for tau_h in EXTERNAL_RECOVERY_TIMES_H:
-        decay = np.exp(-t_rel_s / (tau_h * 3600.0))
         options.append(
             DesignBlock(
-                np.stack([axis, axis * decay[:, None]], axis=2),
+                partial(_recovery_columns, data, tau_h),
                 ["uniform_along_dipole_nt", "uniform_recovering_nt"],
                 variant=f"recovery_{tau_h:.3g}h",
             )
@@ -573,6 +592,14 @@ def _design_external(data: DiagnosisData, train: BoolArray) -> DesignBlock | Non
             )
         )
     return DesignBlock(options[0].g, options[0].names, options[0].variant, tuple(options[1:]))
+
+
+def _recovery_columns(data: DiagnosisData, tau_h: float) -> FloatArray:
+    """The dipole-axis field and its recovery-phase decay ``exp(-t / tau)``, (N, 3, 2)."""
+    axis = data.dipole_axis_body
+    t_rel_s = data.t_utc_s - float(data.t_utc_s[0])
+    decay = np.exp(-t_rel_s / (tau_h * 3600.0))
+    return np.stack([axis, axis * decay[:, None]], axis=2)
 
 
 def _design_crustal(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
