@@ -46,6 +46,16 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     d.set_defaults(func=run_diagnose)
 
 
+def _machine(wall_s: float) -> dict[str, object]:
+    """Where and how long a benchmark ran (the ``machine`` block of its results)."""
+    return {
+        "platform": platform.platform(),
+        "python": platform.python_version(),
+        "cpu_count": __import__("os").cpu_count(),
+        "wall_seconds": wall_s,
+    }
+
+
 def run_diagnose(args: argparse.Namespace) -> int:
     """Run the blind diagnosis benchmark with a progress bar; print the summary."""
     from rich.console import Console
@@ -93,12 +103,7 @@ def run_diagnose(args: argparse.Namespace) -> int:
             progress=on_case,
         )
     wall = time.perf_counter() - t0
-    result["machine"] = {
-        "platform": platform.platform(),
-        "python": platform.python_version(),
-        "cpu_count": __import__("os").cpu_count(),
-        "wall_seconds": wall,
-    }
+    result["machine"] = _machine(wall)
     s = result["summary"]
     print(
         f"cases {s['cases']}: top-1 {s['top1']:.1%} "
@@ -131,12 +136,7 @@ def _run_compound(args: argparse.Namespace, tle_text: str) -> int:
         args.cases, seed=args.seed, tle_text=tle_text, n_orbits=args.orbits
     )
     wall = time.perf_counter() - t0
-    result["machine"] = {
-        "platform": platform.platform(),
-        "python": platform.python_version(),
-        "cpu_count": __import__("os").cpu_count(),
-        "wall_seconds": wall,
-    }
+    result["machine"] = _machine(wall)
     s = result["summary"]
     print(
         f"compound worlds {s['worlds']} ({s['worlds_2']} of 2, {s['worlds_3']} of 3 effects): "

@@ -151,25 +151,19 @@ def _scaled_effect(name: str, magnitude: float, rng: np.random.Generator) -> Any
     return make_effect(name, **params)
 
 
-def run_case(
-    case: BenchCase,
-    *,
-    tle_text: str,
-    n_orbits: float = 4.0,
-    cadence_s: float = 10.0,
-    crust_model: str | None = "LCS-1",
-) -> dict[str, Any]:
-    """Simulate one world, diagnose it blind, score it against the truth and the oracles."""
-    from orbitcal.diagnose.api import diagnosis_data
-    from orbitcal.orbit import Orbit
-    from orbitcal.simulate import NadirLVLH, Tumbling, select_tle, simulate_world
+def _case_orbit(
+    norad_id: int, attitude_name: str, tle_text: str, rng: np.random.Generator
+) -> tuple[Any, float, Any]:
+    """A case's element set, start time and attitude, drawn from ``rng`` in this order: one of
+    the sets of ``norad_id``, a start within a day of its epoch, then (tumbling) a rate of
+    0.5-3 deg/s and an initial attitude. Shared by the single-effect and compound cases."""
+    from orbitcal.simulate import NadirLVLH, Tumbling, select_tle
 
-    rng = np.random.default_rng(case.seed)
-    tles = [s for s in _tle_sets(tle_text) if s.norad_id == case.norad_id]
+    tles = [s for s in _tle_sets(tle_text) if s.norad_id == norad_id]
     tle = tles[int(rng.integers(len(tles)))]
     start = tle.epoch_utc_s + float(rng.uniform(0.0, 86400.0))
-    tle = select_tle(tle_text, norad_id=case.norad_id, at_utc_s=start)
-    if case.attitude == "nadir":
+    tle = select_tle(tle_text, norad_id=norad_id, at_utc_s=start)
+    if attitude_name == "nadir":
         attitude: Any = NadirLVLH()
     else:
         rate = rng.normal(size=3)
@@ -179,9 +173,26 @@ def run_case(
             rate_body_deg_s=tuple(float(x) for x in rate),  # type: ignore[arg-type]
             q0_wxyz=tuple(float(x) for x in q0 / np.linalg.norm(q0)),  # type: ignore[arg-type]
         )
-    effects = [] if case.effect == "none" else [_scaled_effect(case.effect, case.magnitude, rng)]
+    return tle, start, attitude
+
+
+def _world_and_data(
+    tle: Any,
+    start: float,
+    attitude: Any,
+    effects: list[Any],
+    rng: np.random.Generator,
+    *,
+    n_orbits: float,
+    cadence_s: float,
+    crust_model: str | None,
+) -> tuple[Any, Any]:
+    """Simulate ``n_orbits`` orbits from ``start``; ``(world, data)`` as the diagnosis sees it."""
+    from orbitcal.diagnose.api import diagnosis_data
+    from orbitcal.orbit import Orbit
+    from orbitcal.simulate import simulate_world
+
     period_s = 86400.0 / float(tle.line2[52:63])
-    t0 = time.perf_counter()
     world = simulate_world(
         tle,
         start_utc_s=start,
@@ -192,6 +203,32 @@ def run_case(
         effects=effects,
     )
     data = diagnosis_data(world.telemetry, orbit=Orbit.from_tle(tle.text), crust_model=crust_model)
+    return world, data
+
+
+def run_case(
+    case: BenchCase,
+    *,
+    tle_text: str,
+    n_orbits: float = 4.0,
+    cadence_s: float = 10.0,
+    crust_model: str | None = "LCS-1",
+) -> dict[str, Any]:
+    """Simulate one world, diagnose it blind, score it against the truth and the oracles."""
+    rng = np.random.default_rng(case.seed)
+    tle, start, attitude = _case_orbit(case.norad_id, case.attitude, tle_text, rng)
+    effects = [] if case.effect == "none" else [_scaled_effect(case.effect, case.magnitude, rng)]
+    t0 = time.perf_counter()
+    world, data = _world_and_data(
+        tle,
+        start,
+        attitude,
+        effects,
+        rng,
+        n_orbits=n_orbits,
+        cadence_s=cadence_s,
+        crust_model=crust_model,
+    )
     att = attribute(data, split_tests=False)
     elapsed = time.perf_counter() - t0
 
@@ -458,40 +495,21 @@ def simulate_compound_world(
     Returns ``(world, data)``: the :func:`orbitcal.simulate.simulate_world` result (with the
     truth) and the :class:`orbitcal.diagnose.effects.DiagnosisData` the diagnosis sees.
     """
-    from orbitcal.diagnose.api import diagnosis_data
-    from orbitcal.orbit import Orbit
-    from orbitcal.simulate import NadirLVLH, Tumbling, select_tle, simulate_world
-
     rng = np.random.default_rng(case.seed)
-    tles = [s for s in _tle_sets(tle_text) if s.norad_id == case.norad_id]
-    tle = tles[int(rng.integers(len(tles)))]
-    start = tle.epoch_utc_s + float(rng.uniform(0.0, 86400.0))
-    tle = select_tle(tle_text, norad_id=case.norad_id, at_utc_s=start)
-    if case.attitude == "nadir":
-        attitude: Any = NadirLVLH()
-    else:
-        rate = rng.normal(size=3)
-        rate *= float(rng.uniform(0.5, 3.0)) / np.linalg.norm(rate)
-        q0 = rng.normal(size=4)
-        attitude = Tumbling(
-            rate_body_deg_s=tuple(float(x) for x in rate),  # type: ignore[arg-type]
-            q0_wxyz=tuple(float(x) for x in q0 / np.linalg.norm(q0)),  # type: ignore[arg-type]
-        )
+    tle, start, attitude = _case_orbit(case.norad_id, case.attitude, tle_text, rng)
     effects = [
         _scaled_effect(n, m, rng) for n, m in zip(case.effects, case.magnitudes, strict=True)
     ]
-    period_s = 86400.0 / float(tle.line2[52:63])
-    world = simulate_world(
+    return _world_and_data(
         tle,
-        start_utc_s=start,
-        duration_s=n_orbits * period_s,
+        start,
+        attitude,
+        effects,
+        rng,
+        n_orbits=n_orbits,
         cadence_s=cadence_s,
-        rng=rng,
-        attitude=attitude,
-        effects=effects,
+        crust_model=crust_model,
     )
-    data = diagnosis_data(world.telemetry, orbit=Orbit.from_tle(tle.text), crust_model=crust_model)
-    return world, data
 
 
 def run_compound_case(
