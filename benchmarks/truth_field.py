@@ -9,8 +9,9 @@ over samples on every core, and plain C loops (``benchmarks/kernels/field_loop.c
 gcc -O3 -march=native and the floating-point licences of the kernel's fastmath at benchmark time,
 called through ctypes, one thread per core each with a share of the samples): ``synth_lanes``, the
 kernel's own algorithm, and ``synth_rows``, the kernel's previous algorithm (Legendre rows stored
-per sample). The variants run in turn, ``--repeat`` rounds; medians are quoted, with the process
-CPU time over the wall time (cores actually used), and every result is checked against the serial
+per sample). The variants run in turn, ``--repeat`` rounds, each round starting one variant later;
+medians are quoted, with the process CPU time over the wall time (cores actually used) and points
+per CPU second, and every result is checked against the serial
 kernel (max |difference| in nT). The limit is the fastest C loop on every core.
 Table: ``benchmarks/results/truth_field_kernel.md``.
 
@@ -241,8 +242,11 @@ def kernel_limit(n: int, repeat: int, out: Path) -> None:
         times: dict[str, list[float]] = {k: [] for k in runs}
         cpu: dict[str, list[float]] = {k: [] for k in runs}
         diffs: dict[str, float] = dict.fromkeys(runs, 0.0)
-        for _ in range(repeat):
-            for name, fn in runs.items():
+        names = list(runs)
+        for r in range(repeat):
+            # each round starts one variant later: no variant always follows the same one
+            for name in names[r % len(names) :] + names[: r % len(names)]:
+                fn = runs[name]
                 c0 = time.process_time()
                 t0 = time.perf_counter()
                 res = fn()
@@ -269,7 +273,10 @@ def kernel_limit(n: int, repeat: int, out: Path) -> None:
         "--kernel-only`)",
         "",
         f"IGRF-14 at {n:,} samples of a Swarm A orbit (1 s apart, each at its own time); "
-        f"the variants run in turn, {repeat} rounds, medians quoted.",
+        f"the variants run in turn (each round starting one variant later), {repeat} rounds, "
+        "medians quoted. Command: "
+        f"`python benchmarks/truth_field.py --kernel-only --kernel-n {n} --repeat {repeat}` "
+        "(about 15 s on this machine under load).",
         "",
         "## Machine",
         "",
@@ -296,12 +303,16 @@ def kernel_limit(n: int, repeat: int, out: Path) -> None:
         "Algorithm (kernel and `synth_lanes`): for each order m the Schmidt recursion in degree "
         "keeps its two previous terms in registers and each term is summed at once; 32 samples "
         "of one model piece at a time in SIMD lanes; Gauss coefficients by Horner in time at "
-        "each sample's own time, read in the order the loops use them. `synth_rows` is the "
+        "each sample's own time, read in the order the loops use them; IGRF being linear in "
+        "time within a piece, one loop over lanes per (n, m) term does recursion, coefficients "
+        "and sums, with (a/r)^(n+2) carried by the Legendre functions. `synth_rows` is the "
         "previous kernel's algorithm (per sample: all coefficients into a buffer, Legendre rows "
         "stored and read back, scalar), kept to show what the change is worth in C as well.",
         "Parallel runs split the samples into shares (the kernel: 8 chunks per thread, `prange`); "
         "on a machine shared with other jobs the second core is only partly ours, which the load "
-        "average and the cores-used column show.",
+        "average and the cores-used column show. Points per CPU second compare code "
+        "independently of that share; a parallel run's CPU seconds include the threading "
+        "layer's waiting.",
         "",
     ]
     out.write_text("\n".join(lines))

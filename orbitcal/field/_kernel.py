@@ -44,8 +44,9 @@ except ImportError:  # pragma: no cover
 _EARTH_REFERENCE_RADIUS_KM = 6371.2  # same constant as orbitcal.field.synthesis
 _POLE_EPS_RAD = 1e-9
 
-#: Samples evaluated together (SIMD lanes over samples). 32 measured best on AVX-512
-#: (8 and 16: the loops are unrolled instead of vectorised; 64: register spills).
+#: Samples evaluated together (SIMD lanes over samples). With 8 the loops over lanes are unrolled
+#: rather than vectorised (Numba leaves LLVM's SLP vectoriser off); 16 to 64 measured alike within
+#: the noise of a shared machine, 32 fills AVX-512 registers four times over.
 LANES = 32
 
 # Rows of the per-block lane state (one array, so that the compiler sees disjoint rows).
