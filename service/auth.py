@@ -74,11 +74,16 @@ class Principal:
 
 
 def is_loopback(host: str) -> bool:
+    """Whether the configured bind host (``serve --host``, ``ORBITCAL_BIND_HOST``) is loopback.
+
+    A check of the operator's configuration at start-up, not a request's answer: a host name other
+    than ``localhost`` counts as not loopback (the safe side: auth must be on).
+    """
     if host in ("localhost", ""):
         return host == "localhost"
     try:
         return ipaddress.ip_address(host).is_loopback
-    except ValueError:
+    except ValueError:  # the stdlib's only way to say "not an IP address"; no answer is built
         return False
 
 
