@@ -255,7 +255,10 @@ def kernel_limit(n: int, repeat: int, out: Path) -> None:
                 diffs[name] = max(diffs[name], float(np.max(np.abs(res - reference))))
     machine["load average at end"] = " ".join(f"{x:.2f}" for x in os.getloadavg())
     machine["C compiler"] = compiler
-    machine["numba threading layer"] = str(numba.threading_layer())
+    machine["parallel kernel"] = (
+        f"{cores} Python threads taking chunks of samples in turn; the compiled kernel releases "
+        "the GIL"
+    )
     pps = {k: n / float(np.median(v)) for k, v in times.items()}
     cores_used = {k: float(np.median(np.array(cpu[k]) / np.array(v))) for k, v in times.items()}
     per_cpu_s = {k: n / float(np.median(v)) for k, v in cpu.items()}
@@ -308,7 +311,8 @@ def kernel_limit(n: int, repeat: int, out: Path) -> None:
         "and sums, with (a/r)^(n+2) carried by the Legendre functions. `synth_rows` is the "
         "previous kernel's algorithm (per sample: all coefficients into a buffer, Legendre rows "
         "stored and read back, scalar), kept to show what the change is worth in C as well.",
-        "Parallel runs split the samples into shares (the kernel: 8 chunks per thread, `prange`); "
+        "Parallel runs split the samples into shares (the kernel: 8 chunks per thread, taken "
+        "in turn by its worker threads); "
         "on a machine shared with other jobs the second core is only partly ours, which the load "
         "average and the cores-used column show. Points per CPU second compare code "
         "independently of that share; a parallel run's CPU seconds include the threading "

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import multiprocessing
+import os
+
 import numpy as np
 import pytest
 
@@ -70,3 +73,17 @@ def test_a_static_model_takes_the_linear_lanes_and_matches_numpy() -> None:
     numba_path = field.evaluate(t, radius, colat, lon, backend="numba")
     assert np.abs(numpy_path).max() > 1.0
     np.testing.assert_allclose(numba_path, numpy_path, rtol=0.0, atol=1e-9)
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="needs fork")
+def test_parallel_kernel_works_in_a_forked_child_after_the_parent_used_it() -> None:
+    # The worker threads do not survive fork; a prefork worker must not wait on them.
+    field = get_field("IGRF-14")
+    n = 2 * _kernel.MIN_SAMPLES_PER_THREAD
+    t = 1.6e9 + np.arange(n, dtype=float)
+    args = (t, np.full(n, 6800.0), np.linspace(1.0, 179.0, n), np.linspace(-180.0, 180.0, n))
+    parent = field.b_nec_nt(*args)
+    ctx = multiprocessing.get_context("fork")
+    with ctx.Pool(1) as pool:
+        child = pool.apply_async(field.b_nec_nt, args).get(timeout=120)
+    np.testing.assert_allclose(child, parent, rtol=0.0, atol=1e-9)

@@ -21,7 +21,9 @@ is then used.
 
 from __future__ import annotations
 
+import concurrent.futures
 import contextlib
+import itertools
 import math
 import os
 import threading
@@ -491,63 +493,14 @@ def _kernel_range(
         )  # fmt: skip
 
 
-def _kernel_serial(
-    ppm: NDArray[np.float64],
-    piece: NDArray[np.int64],
-    dt: NDArray[np.float64],
-    radius_km: NDArray[np.float64],
-    colat_rad: NDArray[np.float64],
-    lon_rad: NDArray[np.float64],
-    nmin: int,
-    nmax: int,
-    ab: NDArray[np.float64],
-    d_c: NDArray[np.float64],
-    out: NDArray[np.float64],
-) -> None:
-    _range_fn(
-        ppm, piece, dt, radius_km, colat_rad, lon_rad, nmin, nmax, ab, d_c, 0,
-        radius_km.shape[0], out,
-    )  # fmt: skip
-
-
-def _kernel_parallel(
-    ppm: NDArray[np.float64],
-    piece: NDArray[np.int64],
-    dt: NDArray[np.float64],
-    radius_km: NDArray[np.float64],
-    colat_rad: NDArray[np.float64],
-    lon_rad: NDArray[np.float64],
-    nmin: int,
-    nmax: int,
-    ab: NDArray[np.float64],
-    d_c: NDArray[np.float64],
-    n_chunks: int,
-    out: NDArray[np.float64],
-) -> None:
-    # Chunk boundaries fall on multiples of LANES, so every sample takes the same path (block
-    # or single) as in the serial kernel: results agree with it to rounding (~1e-11 nT; the
-    # compiler may contract the same expressions differently where it inlines them).
-    n_pts = radius_km.shape[0]
-    n_blocks = n_pts // LANES
-    for c in _prange(n_chunks):
-        start = (c * n_blocks // n_chunks) * LANES
-        stop = n_pts if c == n_chunks - 1 else ((c + 1) * n_blocks // n_chunks) * LANES
-        _range_fn(
-            ppm, piece, dt, radius_km, colat_rad, lon_rad, nmin, nmax, ab, d_c, start, stop, out
-        )
-
-
-_prange: Any = range
 _sample_fn: Any = _sample
 _block_fn: Any = _block
 _block_linear_fn: Any = _block_linear
 _range_fn: Any = _kernel_range
 _compiled: Any = None
-_compiled_parallel: Any = None
 if HAVE_NUMBA:
     # fastmath without "nnan"/"ninf": reassociation lets the lane loops vectorise; inputs stay IEEE.
     _FASTMATH = {"reassoc", "contract", "nsz", "arcp"}
-    _prange = numba.prange
 
     def _jit(fn: Any, **kw: Any) -> Any:
         try:
@@ -564,8 +517,7 @@ if HAVE_NUMBA:
     _block_fn = _jit(_block, inline="always")
     _block_linear_fn = _jit(_block_linear, inline="always")
     _range_fn = _jit(_kernel_range)
-    _compiled = _jit(_kernel_serial)
-    _compiled_parallel = _jit(_kernel_parallel, parallel=True)
+    _compiled = _range_fn
 
 #: Below this many samples per thread the threads cost more than they save (one thread).
 MIN_SAMPLES_PER_THREAD = 20_000
@@ -573,27 +525,78 @@ MIN_SAMPLES_PER_THREAD = 20_000
 #: Chunks per thread: a thread slowed by another job on its core leaves work for the others.
 CHUNKS_PER_THREAD = 8
 
-# The parallel kernel is entered by one caller at a time (numba's default "workqueue" threading
-# layer is not safe for concurrent launches); a caller that finds it busy runs the serial kernel.
+# Parallel runs are entered by one caller at a time (so that concurrent callers, e.g. a service's
+# request threads, do not oversubscribe the cores); a caller that finds it busy runs serially.
 _PARALLEL_LOCK = threading.Lock()
+_POOL: concurrent.futures.ThreadPoolExecutor | None = None
 
 
-def _numba_threads() -> int:
-    """Numba's thread pool size (``NUMBA_NUM_THREADS``, default: every core)."""
-    return int(numba.config.NUMBA_NUM_THREADS) if HAVE_NUMBA else 1  # type: ignore[attr-defined]
+def _after_fork_in_child() -> None:
+    # a forked child (e.g. a prefork worker) has neither the parent's threads nor its lock holder
+    global _POOL, _PARALLEL_LOCK
+    _POOL = None
+    _PARALLEL_LOCK = threading.Lock()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_after_fork_in_child)
+
+
+def _pool() -> concurrent.futures.ThreadPoolExecutor:
+    """The worker threads (created on first use; idle workers block, they do not spin)."""
+    global _POOL
+    if _POOL is None:
+        _POOL = concurrent.futures.ThreadPoolExecutor(
+            max(1, _cores()), thread_name_prefix="orbitcal-field"
+        )
+    return _POOL
+
+
+def _cores() -> int:
+    """Cores this process may run on, bounded by ``NUMBA_NUM_THREADS`` if set."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not on Linux
+        cores = os.cpu_count() or 1
+    return min(cores, int(numba.config.NUMBA_NUM_THREADS)) if HAVE_NUMBA else 1  # type: ignore[attr-defined]
 
 
 def max_threads() -> int:
     """Threads the parallel kernel may use: ``ORBITCAL_FIELD_THREADS`` if set, else every core
-    numba sees (bounded by numba's own ``NUMBA_NUM_THREADS``)."""
+    the process may run on (bounded by numba's ``NUMBA_NUM_THREADS``)."""
     if not HAVE_NUMBA:
         return 1
-    limit = _numba_threads()
+    limit = _cores()
     env = os.environ.get("ORBITCAL_FIELD_THREADS")
     if env:
         with contextlib.suppress(ValueError):
             return max(1, min(limit, int(env)))
     return limit
+
+
+def _run_parallel(
+    args: tuple[Any, ...], n_pts: int, n_threads: int, out: NDArray[np.float64]
+) -> None:
+    """``n_threads`` workers take chunks of samples in turn until none is left.
+
+    Chunk boundaries fall on multiples of :data:`LANES`, so every sample takes the same path
+    (lanes or single) as in a serial run; the kernel releases the GIL, so the workers run on
+    separate cores, and a worker slowed by another job on its core leaves chunks to the others.
+    """
+    n_chunks = n_threads * CHUNKS_PER_THREAD
+    n_blocks = n_pts // LANES
+    bounds = [(c * n_blocks // n_chunks) * LANES for c in range(n_chunks)] + [n_pts]
+    next_chunk = itertools.count()  # next() is atomic under the GIL
+
+    def worker() -> None:
+        for c in next_chunk:
+            if c >= n_chunks:
+                return
+            _compiled(*args, bounds[c], bounds[c + 1], out)
+
+    futures = [_pool().submit(worker) for _ in range(n_threads)]
+    for f in futures:
+        f.result()
 
 
 def synth_pp_nec_nt(
@@ -652,18 +655,13 @@ def synth_pp_nec_nt(
         ab,
         d_c,
     )
-    cap = max_threads() if threads is None else min(threads, _numba_threads())
+    cap = max_threads() if threads is None else min(threads, _cores())
     n_threads = min(cap, n_pts // MIN_SAMPLES_PER_THREAD)
     if n_threads >= 2 and _PARALLEL_LOCK.acquire(blocking=False):
         try:
-            previous = numba.get_num_threads()
-            numba.set_num_threads(n_threads)
-            try:
-                _compiled_parallel(*args, n_threads * CHUNKS_PER_THREAD, out)
-            finally:
-                numba.set_num_threads(previous)
+            _run_parallel(args, n_pts, n_threads, out)
         finally:
             _PARALLEL_LOCK.release()
         return out
-    _compiled(*args, out)
+    _compiled(*args, 0, n_pts, out)
     return out
