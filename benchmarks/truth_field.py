@@ -470,7 +470,8 @@ def _write(path: Path, machine: dict[str, str], rows: list[dict[str, object]], m
         "body-frame time.",
         "- peak memory: tracemalloc peak during one body-frame run beyond its inputs, per sample "
         "(for the fleet: per spacecraft run of 8,640 samples).",
-        "- orbitcal's field uses the compiled per-sample kernel (numba, one thread); the first "
+        "- orbitcal's field uses the compiled kernel (numba; on every core from "
+        f"{2 * _kernel.MIN_SAMPLES_PER_THREAD:,} samples, see truth_field_kernel.md); the first "
         "call in a fresh environment compiles it (a few seconds, cached on disk afterwards) and is "
         "excluded as warm-up.",
         "",
