@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import contextlib
 import itertools
+import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property, partial
@@ -434,8 +435,31 @@ class DesignBlock:
     @property
     def g(self) -> FloatArray:
         """Regressors in the sensor/body frame, shape (N, 3, p); parameter ``k`` adds
-        ``c[k] * g[:, :, k]`` [nT]. Built on every access when :attr:`source` is a function."""
-        return self.source() if callable(self.source) else self.source
+        ``c[k] * g[:, :, k]`` [nT]. When :attr:`source` is a function, the last
+        ``LAZY_BLOCKS_KEPT`` blocks built are kept (a pair of effects fitted together again and
+        again is not rebuilt) and older ones are built again when asked for."""
+        if not callable(self.source):
+            return self.source
+        built = self.__dict__.get("_built")
+        if built is None:
+            built = self.source()
+            _keep_built(self, built)
+        return np.asarray(built)
+
+
+#: How many lazily built design blocks keep their regressors (memory: that many blocks).
+LAZY_BLOCKS_KEPT = 2
+_KEPT: list[weakref.ref[DesignBlock]] = []
+
+
+def _keep_built(block: DesignBlock, g: FloatArray) -> None:
+    """Keep ``g`` with ``block``; the oldest kept block beyond ``LAZY_BLOCKS_KEPT`` drops its."""
+    block.__dict__["_built"] = g
+    _KEPT.append(weakref.ref(block))
+    while len(_KEPT) > LAZY_BLOCKS_KEPT:
+        old = _KEPT.pop(0)()
+        if old is not None:
+            old.__dict__.pop("_built", None)
 
 
 DesignFn = Callable[[DiagnosisData, BoolArray], DesignBlock | None]
@@ -755,8 +779,10 @@ def _design_fac(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
 
 def _fac_bump(mlat_deg: FloatArray, sign: float, centre_deg: float) -> FloatArray:
     """A latitude bump of the field-aligned-current basis (zero equatorward of its range)."""
-    bump = np.exp(-0.5 * ((sign * mlat_deg - centre_deg) / FAC_WIDTH_DEG) ** 2)
-    bump[sign * mlat_deg < FAC_MIN_MLAT_DEG - 3 * FAC_WIDTH_DEG] = 0.0
+    x = sign * mlat_deg
+    on = x >= FAC_MIN_MLAT_DEG - 3 * FAC_WIDTH_DEG
+    bump = np.zeros_like(x)
+    bump[on] = np.exp(-0.5 * ((x[on] - centre_deg) / FAC_WIDTH_DEG) ** 2)
     return bump
 
 
@@ -767,8 +793,11 @@ def _fac_columns(data: DiagnosisData, bumps: tuple[tuple[float, float, str], ...
     phi = data.mlt_angle_rad
     mods = {} if phi is None else {"_sin_mlt": np.sin(phi), "_cos_mlt": np.cos(phi)}
     g = np.empty((data.n, 3, len(bumps)))
+    bump_of: dict[tuple[float, float], FloatArray] = {}
     for k, (sign, c, suffix) in enumerate(bumps):
-        w = _fac_bump(data.mlat_deg, sign, c)
+        if (sign, c) not in bump_of:
+            bump_of[(sign, c)] = _fac_bump(data.mlat_deg, sign, c)
+        w = bump_of[(sign, c)]
         if suffix in mods:
             w = w * mods[suffix]
         np.multiply(east, w[:, None], out=g[:, :, k])
