@@ -16,10 +16,10 @@ from orbitcal.diagnose.attribution import (
     attribute,
     fit_joint,
     time_blocks,
-    vector_rms_nt,
 )
 from orbitcal.diagnose.bench import CompoundCase, run_compound_case
 from orbitcal.diagnose.effects import get_effect
+from orbitcal.metrics import norm_rms_nt
 
 pytestmark = pytest.mark.usefixtures("single_thread_blas")  # tests/conftest.py
 
@@ -113,7 +113,7 @@ def test_candidate_is_judged_against_the_model_before_it() -> None:
     r_base = sel.data.b_raw_nt - base.predict_nt(sel.data)
     real = sel.candidate([], "magnetorquer", r_base)
     assert real.passes(0.05 / len(sel.designs))
-    assert real.holdout_rms_nt < vector_rms_nt(r_base[sel.holdout])
+    assert real.holdout_rms_nt < norm_rms_nt(r_base[sel.holdout])
     # with the coupling in the model, nonlinearity has nothing left to explain
     after = sel.candidate([real.block], "nonlinearity", real.residual_nt, real.fit)
     assert not after.passes(0.05 / len(sel.designs))

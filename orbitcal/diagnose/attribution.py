@@ -40,6 +40,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy import stats
 
+from orbitcal.arrays import BoolArray, FloatArray
 from orbitcal.diagnose.blocked import BlockedDesign
 from orbitcal.diagnose.bounds import consistency_reasons, param_range
 from orbitcal.diagnose.effects import (
@@ -49,6 +50,7 @@ from orbitcal.diagnose.effects import (
     DiagnosisData,
     Effect,
 )
+from orbitcal.metrics import norm_rms_nt
 
 __all__ = [
     "Attribution",
@@ -59,23 +61,12 @@ __all__ = [
     "fit_joint",
     "split_fit_tests",
     "time_blocks",
-    "vector_rms_nt",
 ]
-
-FloatArray = npt.NDArray[np.float64]
-BoolArray = npt.NDArray[np.bool_]
 
 
 #: Equal-duration time blocks of a diagnosis, and how many of the latest are held out.
 N_BLOCKS = 10
 HOLDOUT_BLOCKS = 3
-
-
-def vector_rms_nt(r_nt: FloatArray) -> float:
-    """Root mean square of the vector residual magnitude, ``sqrt(mean |r|^2)`` [nT]."""
-    if r_nt.size == 0:
-        return float("nan")
-    return float(np.sqrt(np.mean(np.sum(r_nt**2, axis=-1))))
 
 
 def time_blocks(
@@ -817,7 +808,7 @@ class Selection:
         """Joint fit of ``blocks`` as they are; residual at every sample and held-out RMS."""
         fit = fit_joint(self.data, self.train, blocks, robust=self.robust, bounded=bounded)
         r = self.data.b_raw_nt - fit.predict_nt(self.data)
-        return fit, r, vector_rms_nt(r[self.holdout])
+        return fit, r, norm_rms_nt(r[self.holdout])
 
     def test(self, fit: JointFit, r: FloatArray, r_before: FloatArray, k: int = -1) -> float:
         """p-value of the held-out chunk test of block ``k`` of ``fit`` (default the last)."""
@@ -878,7 +869,7 @@ class Selection:
                 block = again
         fit, r, rms = self.evaluate(fixed, block)
         if rms_before is None:
-            rms_before = vector_rms_nt(r_before[self.holdout])
+            rms_before = norm_rms_nt(r_before[self.holdout])
         p, ok = self.judge(fit, r, r_before, rms, rms_before)
         return Candidate(name, fit, r, rms, p, ok)
 
@@ -1091,7 +1082,7 @@ def attribute(
         )
     base = fit_joint(data, train, (), robust=robust)
     r_base = data.b_raw_nt - base.predict_nt(data)
-    base_rms = vector_rms_nt(r_base[holdout])
+    base_rms = norm_rms_nt(r_base[holdout])
 
     designs: dict[str, DesignBlock] = {}
     for eff in candidates:
@@ -1221,7 +1212,7 @@ def attribute(
     splits = split_fit_tests(data, robust=robust) if split_tests else []
     return Attribution(
         baseline_rms_nt=base_rms,
-        baseline_train_rms_nt=vector_rms_nt(r_base[train]),
+        baseline_train_rms_nt=norm_rms_nt(r_base[train]),
         verdict=selected[0] if selected else "none",
         effects=effects,
         selected=selected,
@@ -1506,9 +1497,9 @@ def _regional_fac(
     b_hat = data.b_hat_body
     par = np.sum(r_now * b_hat, axis=1)
     perp = r_now - par[:, None] * b_hat
-    rms_hi = vector_rms_nt(r_now[hi])
-    rms_lo = vector_rms_nt(r_now[lo])
-    perp_hi = vector_rms_nt(perp[hi])
+    rms_hi = norm_rms_nt(r_now[hi])
+    rms_lo = norm_rms_nt(r_now[lo])
+    perp_hi = norm_rms_nt(perp[hi])
     par_hi = float(np.sqrt(np.mean(par[hi] ** 2)))
     # Cross-validated within the crossings: consecutive FAC_CV_CHUNK_S chunks are dealt round-robin
     # to FAC_CV_FOLDS folds; the bumps fitted on the other folds predict each fold.
@@ -1522,7 +1513,7 @@ def _regional_fac(
         g = g_hi[fit_rows].reshape(-1, g_hi.shape[2])
         coef = np.linalg.lstsq(g, r_now[idx[fit_rows]].reshape(-1), rcond=None)[0]
         pred[test_rows] = g_hi[test_rows] @ coef
-    rms_after = vector_rms_nt(r_now[hi] - pred)
+    rms_after = norm_rms_nt(r_now[hi] - pred)
     significant = bool(
         rms_hi > 3.0 * rms_lo and perp_hi > 2.0 * par_hi and rms_after < 0.75 * rms_hi
     )
@@ -1597,15 +1588,6 @@ def _split(
     )
 
 
-def body_rate_rad_s(data: DiagnosisData) -> FloatArray:
-    """Magnitude of the body rotation rate relative to ITRS [rad/s], per sample."""
-    r = data.rot_itrs_to_body
-    rel = np.einsum("nij,nkj->nik", r[1:], r[:-1])
-    angle = np.arccos(np.clip((np.trace(rel, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0))
-    rate = angle / np.diff(data.t_utc_s)
-    return np.concatenate([rate[:1], rate])
-
-
 def split_fit_tests(
     data: DiagnosisData,
     *,
@@ -1628,7 +1610,7 @@ def split_fit_tests(
         s = _split(data, [lit, ~lit], ["sunlit", "eclipse"], "sunlit_vs_eclipse", **kw)  # type: ignore[arg-type]
         if s is not None:
             out.append(s)
-    rate = body_rate_rad_s(data)
+    rate = np.linalg.norm(data.body_rate_itrs_rad_s, axis=1)  # [rad/s], relative to ITRS
     lo, hi = np.quantile(rate, [0.25, 0.75])
     if lo > 0 and hi / lo > 3.0:
         s = _split(

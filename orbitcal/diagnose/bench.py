@@ -31,8 +31,9 @@ from typing import Any
 
 import numpy as np
 
-from orbitcal.diagnose.attribution import attribute, fit_joint, vector_rms_nt
+from orbitcal.diagnose.attribution import attribute, fit_joint
 from orbitcal.diagnose.effects import EFFECT_NAMES, get_effect
+from orbitcal.metrics import norm_rms_nt
 
 __all__ = [
     "BENCH_CLASSES",
@@ -242,7 +243,7 @@ def run_case(
             chosen = _resolve(data, att.train, [], block)
             fit = fit_joint(data, att.train, [chosen])
             r = data.b_raw_nt - fit.predict_nt(data)
-            oracle_rms = vector_rms_nt(r[att.holdout])
+            oracle_rms = norm_rms_nt(r[att.holdout])
     # Oracle 2: subtracts the injected field (in sensor axes) and calibrates.
     injected = sum(world.injected_body_nt.values(), np.zeros_like(data.b_raw_nt))
     from orbitcal.diagnose.effects import DiagnosisData
@@ -255,7 +256,7 @@ def run_case(
         r_itrs_km=data.r_itrs_km,
     )
     fit_clean = fit_joint(clean, att.train, [])
-    perfect_rms = vector_rms_nt((clean.b_raw_nt - fit_clean.predict_nt(clean))[att.holdout])
+    perfect_rms = norm_rms_nt((clean.b_raw_nt - fit_clean.predict_nt(clean))[att.holdout])
 
     base = att.baseline_rms_nt
     shrink = base / max(att.final_rms_nt, 1e-12)
@@ -549,7 +550,7 @@ def run_compound_case(
             r_itrs_km=data.r_itrs_km,
         )
         fit = fit_joint(clean, att.train, [])
-        return vector_rms_nt((clean.b_raw_nt - fit.predict_nt(clean))[att.holdout])
+        return norm_rms_nt((clean.b_raw_nt - fit.predict_nt(clean))[att.holdout])
 
     floor = clean_rms(None)
     observable = {n: bool(clean_rms(n) >= floor * (1.0 + OBSERVABLE_GAIN)) for n in case.effects}

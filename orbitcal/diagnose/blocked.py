@@ -19,11 +19,11 @@ from collections.abc import Iterator, Sequence
 import numpy as np
 import numpy.typing as npt
 
+from orbitcal.arrays import FloatArray
 from orbitcal.diagnose.effects import FIELD_SCALE_NT, DesignBlock, DiagnosisData
 
 __all__ = ["FIT_BLOCK_SAMPLES", "BlockedDesign"]
 
-FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
 
 #: Samples per block: the rows of one block, ``3 x FIT_BLOCK_SAMPLES x p x 8`` bytes (1.5 MB at

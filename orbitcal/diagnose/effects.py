@@ -31,6 +31,7 @@ from functools import cached_property, partial
 import numpy as np
 import numpy.typing as npt
 
+from orbitcal.arrays import BoolArray, FloatArray
 from orbitcal.diagnose.prior import CalibrationPrior
 from orbitcal.diagnose.track import along_track
 from orbitcal.geomag import dipole_axis_itrs, magnetic_latitude_deg
@@ -44,8 +45,6 @@ __all__ = [
     "get_effect",
 ]
 
-FloatArray = npt.NDArray[np.float64]
-BoolArray = npt.NDArray[np.bool_]
 
 #: Earth rotation rate about the ITRS z axis [rad/s] (IERS nominal).
 EARTH_ROTATION_RAD_S = 7.292115e-5

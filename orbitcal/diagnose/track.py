@@ -12,11 +12,10 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-import numpy.typing as npt
+
+from orbitcal.arrays import FloatArray
 
 __all__ = ["along_track"]
-
-FloatArray = npt.NDArray[np.float64]
 
 
 def along_track(
