@@ -17,19 +17,34 @@ the same workload (every spacecraft retrained against its champion) with each ``
 count in turn, so the scale-out from one to two worker processes is measured on identical jobs.
 The per-retraining cost distribution (p10, median, p90, p99, max) is reported per run.
 
+Executors: ``--executor processes`` (default) runs K ``multiprocessing`` processes calling
+:func:`service.jobs.run_retrain` on their share of the job list. ``--executor celery`` is the
+deployed path: the jobs are sent through the service's :class:`service.celery_app.CeleryRunner` to
+the broker (``--broker``, Redis by default) and K real ``orbitcal worker --concurrency 1``
+processes (the operator's command, each a Celery solo-pool worker) consume them; the per-retraining
+times, the span and the throughput are then read from the job records (``started_at`` /
+``finished_at``) and each worker's peak RSS from ``/proc``. The Celery mode needs a database every
+worker process can open: by default a fresh schema in the PostgreSQL at ``--pg`` (created and
+dropped by the run), or ``--database URL``.
+
 Usage: ``python benchmarks/fleet.py [--spacecraft 1000] [--workers 1 2]
-[--methods linear lmbp-hk] [--out FILE]``.
+[--methods linear lmbp-hk] [--executor processes|celery] [--broker URL] [--out FILE]``.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import multiprocessing as mp
 import os
 import platform
 import resource
+import subprocess
+import sys
 import tempfile
 import time
+import uuid
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -170,6 +185,129 @@ def run(url: str, method: str, jobs: list[str], workers: int) -> dict[str, Any]:
     }
 
 
+def _peak_rss_mb(pid: int) -> tuple[float, float]:
+    """``(current, peak)`` resident set size of a live process [MB], from ``/proc``."""
+    fields = {}
+    with contextlib.suppress(OSError):
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            key, _, value = line.partition(":")
+            if key in ("VmRSS", "VmHWM"):
+                fields[key] = float(value.split()[0]) / 1024.0
+    return fields.get("VmRSS", float("nan")), fields.get("VmHWM", float("nan"))
+
+
+def _job_records(url: str, jobs: list[str]) -> list[tuple[str, float | None, float | None]]:
+    """``(status, started_at, finished_at)`` of each job, from the database."""
+    import sqlalchemy as sa
+
+    from service.storage import Job, make_engine, read_tx
+
+    engine = make_engine(url)
+    with read_tx(engine) as conn:
+        rows = conn.execute(
+            sa.select(Job.status, Job.started_at, Job.finished_at).where(Job.id.in_(jobs))
+        ).all()
+    engine.dispose()
+    return [(str(r[0]), r[1], r[2]) for r in rows]
+
+
+def run_celery(
+    url: str, broker_url: str, method: str, jobs: list[str], workers: int, timeout_s: float
+) -> dict[str, Any]:
+    """Send ``jobs`` through the service's Celery runner and consume them with ``workers`` real
+    ``orbitcal worker --concurrency 1`` processes; times come from the job records."""
+    from service.celery_app import TASK_NAME, CeleryRunner
+    from service.settings import Settings
+
+    queue = "orbitcal-fleet-" + uuid.uuid4().hex[:8]  # a queue of its own on a shared broker
+    settings = Settings(
+        database_url=url, job_backend="celery", broker_url=broker_url, queue=queue, method=method
+    )
+    app = CeleryRunner(settings).app
+    for job_id in jobs:  # what CeleryRunner.submit sends, synchronously here
+        app.send_task(TASK_NAME, args=[job_id], queue=queue)
+    env = {
+        **os.environ,
+        "ORBITCAL_DATABASE_URL": url,
+        "ORBITCAL_BROKER_URL": broker_url,
+        "ORBITCAL_QUEUE": queue,
+        "ORBITCAL_LOG_LEVEL": "WARNING",
+    }
+    cmd = [sys.executable, "-m", "orbitcal", "worker", "--concurrency", "1"]
+    t0 = time.perf_counter()
+    # worker stderr, shown if a worker dies; closed in the finally below
+    logs = [tempfile.TemporaryFile() for _ in range(workers)]  # noqa: SIM115
+    procs = [subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=log) for log in logs]
+    rss = []
+    try:
+        deadline = time.monotonic() + timeout_s
+        while True:
+            records = _job_records(url, jobs)
+            if all(r[0] in ("succeeded", "failed") for r in records):
+                break
+            for p, log in zip(procs, logs, strict=True):
+                if p.poll() is not None:
+                    log.seek(0)
+                    tail = log.read().decode(errors="replace")[-2000:]
+                    raise RuntimeError(f"a Celery worker exited with {p.returncode}:\n{tail}")
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"{len(jobs)} jobs not done in {timeout_s} s")
+            time.sleep(0.5)
+        wall = time.perf_counter() - t0
+        rss = [_peak_rss_mb(p.pid) for p in procs]
+    finally:
+        for p in procs:
+            p.terminate()
+        for p in procs:
+            try:
+                p.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait(timeout=10)
+        for log in logs:
+            log.close()
+    started = np.array([r[1] for r in records], dtype=float)
+    finished = np.array([r[2] for r in records], dtype=float)
+    times = finished - started
+    busy = float(np.nanmax(finished) - np.nanmin(started))
+    statuses = [r[0] for r in records]
+    return {
+        "workers": workers,
+        "n": len(jobs),
+        "wall_s": wall,
+        "per_job_median_s": float(np.nanmedian(times)),
+        "per_job_p95_s": float(np.nanpercentile(times, 95)),
+        "per_job_pct_s": [float(np.nanpercentile(times, q)) for q in (10, 50, 90, 99, 100)],
+        "method": method,
+        "jobs_s": busy,
+        "throughput_per_s": len(jobs) / busy,
+        "succeeded": statuses.count("succeeded"),
+        # worker RSS when idle after its last job, and its peak
+        "maxrss_mb": max(r[1] for r in rss),
+        "rss_before_mb": max(r[0] for r in rss),
+    }
+
+
+@contextlib.contextmanager
+def _pg_schema(pg_url: str) -> Iterator[str]:
+    """A fresh PostgreSQL schema for this run (dropped afterwards); yields its URL."""
+    import sqlalchemy as sa
+
+    from service.storage import make_engine
+
+    schema = "fleet_" + uuid.uuid4().hex[:12]
+    admin = make_engine(pg_url)
+    with admin.begin() as conn:
+        conn.execute(sa.text(f"CREATE SCHEMA {schema}"))
+    sep = "&" if "?" in pg_url else "?"
+    try:
+        yield f"{pg_url}{sep}options=-csearch_path%3D{schema}"
+    finally:
+        with admin.begin() as conn:
+            conn.execute(sa.text(f"DROP SCHEMA IF EXISTS {schema} CASCADE"))
+        admin.dispose()
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--spacecraft", type=int, default=1000)
@@ -177,36 +315,69 @@ def main() -> None:
     ap.add_argument("--methods", nargs="+", default=["linear", "lmbp-hk"])
     ap.add_argument("--database", help="SQLAlchemy URL (default: a SQLite file in a temp dir)")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument(
+        "--executor",
+        choices=("processes", "celery"),
+        default="processes",
+        help="multiprocessing workers calling run_retrain, or real `orbitcal worker` processes",
+    )
+    ap.add_argument("--broker", default="redis://127.0.0.1:6379/0", help="Celery broker URL")
+    ap.add_argument(
+        "--pg",
+        default="postgresql://postgres@127.0.0.1:5432/test",
+        help="PostgreSQL for the celery executor's own schema (when --database is not given)",
+    )
+    ap.add_argument("--timeout", type=float, default=3600.0, help="per celery run [s]")
     ap.add_argument("--out", type=Path)
     args = ap.parse_args()
+    with contextlib.ExitStack() as stack:
+        if args.database:
+            url, db_name = args.database, "given URL"
+        elif args.executor == "celery":
+            url, db_name = stack.enter_context(_pg_schema(args.pg)), "PostgreSQL (own schema)"
+        else:
+            tmp = Path(tempfile.mkdtemp(prefix="orbitcal-fleet-"))
+            url, db_name = f"sqlite:///{tmp / 'fleet.sqlite'}", "SQLite (WAL)"
+        _bench(args, url, db_name)
+
+
+def _bench(args: argparse.Namespace, url: str, db_name: str) -> None:
     load_before = os.getloadavg()[0]
-    if args.database:
-        url = args.database
-    else:
-        url = f"sqlite:///{Path(tempfile.mkdtemp(prefix='orbitcal-fleet-')) / 'fleet.sqlite'}"
+
+    def execute(method: str, jobs: list[str], workers: int) -> dict[str, Any]:
+        if args.executor == "celery":
+            return run_celery(url, args.broker, method, jobs, workers, args.timeout)
+        return run(url, method, jobs, workers)
+
     t0 = time.perf_counter()
     jobs = _setup(url, args.spacecraft, args.seed)
     setup_s = time.perf_counter() - t0
     print(f"setup: {setup_s:.1f} s", flush=True)
-    rows = []
+    rows: list[dict[str, Any]] = []
     for method in args.methods:
         if rows:
             jobs = _new_jobs(url, method)
-        r = run(url, method, jobs, 1)
+        r = execute(method, jobs, 1)
         r["kind"] = "first calibration" if not rows else "first retraining with this method"
+        r["load"] = os.getloadavg()[0]
         rows.append(r)
         print(r, flush=True)
         for workers in args.workers:
             # the same workload for each worker count: the whole fleet against its champion
-            r = run(url, method, _new_jobs(url, method), workers)
+            r = execute(method, _new_jobs(url, method), workers)
             r["kind"] = "retraining vs champion"
+            r["load"] = os.getloadavg()[0]
             rows.append(r)
             print(r, flush=True)
+    executor = (
+        f"Celery: `orbitcal worker --concurrency 1` processes, broker {args.broker}"
+        if args.executor == "celery"
+        else "multiprocessing worker processes calling run_retrain"
+    )
     lines = [
         f"machine: {platform.machine()}, {os.cpu_count()} cores, shared; 1-min load average "
         f"{load_before:.1f} before, {os.getloadavg()[0]:.1f} after; Python "
-        f"{platform.python_version()}; database "
-        f"{'SQLite (WAL)' if not args.database else 'given URL'}",
+        f"{platform.python_version()}; database {db_name}; executor {executor}",
         f"fleet: {args.spacecraft} spacecraft × 1 day at 0.1 Hz ({int(DAY_S / CADENCE_S)} samples "
         f"each), methods {', '.join(args.methods)}, IGRF-14, TLE propagated per retraining",
         "",
@@ -215,15 +386,16 @@ def main() -> None:
         "",
         "| method | run | worker processes | spacecraft | succeeded | jobs span [s] "
         "| per retraining p10 / p50 / p90 / p99 / max [s] | retrainings/s "
-        "| RSS per worker after imports / peak [MB] |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|",
+        f"| RSS per worker {'at the end' if args.executor == 'celery' else 'after imports'} "
+        "/ peak [MB] | load after |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in rows:
         pct = " / ".join(f"{x:.3f}" for x in r["per_job_pct_s"])
         lines.append(
             f"| {r['method']} | {r['kind']} | {r['workers']} | {r['n']} | {r['succeeded']} "
             f"| {r['jobs_s']:.1f} | {pct} | {r['throughput_per_s']:.2f} "
-            f"| {r['rss_before_mb']:.0f} / {r['maxrss_mb']:.0f} |"
+            f"| {r['rss_before_mb']:.0f} / {r['maxrss_mb']:.0f} | {r['load']:.1f} |"
         )
     for method in args.methods:
         same = [r for r in rows if r["method"] == method and r["kind"] == "retraining vs champion"]
