@@ -196,6 +196,15 @@ def _peak_rss_mb(pid: int) -> tuple[float, float]:
     return fields.get("VmRSS", float("nan")), fields.get("VmHWM", float("nan"))
 
 
+def _cpu_s(pid: int) -> float:
+    """User + system CPU time of a live process [s], from ``/proc``."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return float("nan")
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def _job_records(url: str, jobs: list[str]) -> list[tuple[str, float | None, float | None]]:
     """``(status, started_at, finished_at)`` of each job, from the database."""
     import sqlalchemy as sa
@@ -255,6 +264,7 @@ def run_celery(
             time.sleep(0.5)
         wall = time.perf_counter() - t0
         rss = [_peak_rss_mb(p.pid) for p in procs]
+        cpu_s = sum(_cpu_s(p.pid) for p in procs)  # start-up included
     finally:
         for p in procs:
             p.terminate()
@@ -282,6 +292,7 @@ def run_celery(
         "jobs_s": busy,
         "throughput_per_s": len(jobs) / busy,
         "succeeded": statuses.count("succeeded"),
+        "worker_cpu_s": cpu_s,
         # worker RSS when idle after its last job, and its peak
         "maxrss_mb": max(r[1] for r in rss),
         "rss_before_mb": max(r[0] for r in rss),
@@ -387,15 +398,16 @@ def _bench(args: argparse.Namespace, url: str, db_name: str) -> None:
         "| method | run | worker processes | spacecraft | succeeded | jobs span [s] "
         "| per retraining p10 / p50 / p90 / p99 / max [s] | retrainings/s "
         f"| RSS per worker {'at the end' if args.executor == 'celery' else 'after imports'} "
-        "/ peak [MB] | load after |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "/ peak [MB] | load after | worker CPU [s] |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in rows:
         pct = " / ".join(f"{x:.3f}" for x in r["per_job_pct_s"])
         lines.append(
             f"| {r['method']} | {r['kind']} | {r['workers']} | {r['n']} | {r['succeeded']} "
             f"| {r['jobs_s']:.1f} | {pct} | {r['throughput_per_s']:.2f} "
-            f"| {r['rss_before_mb']:.0f} / {r['maxrss_mb']:.0f} | {r['load']:.1f} |"
+            f"| {r['rss_before_mb']:.0f} / {r['maxrss_mb']:.0f} | {r['load']:.1f} "
+            f"| {r.get('worker_cpu_s', float('nan')):.1f} |"
         )
     for method in args.methods:
         same = [r for r in rows if r["method"] == method and r["kind"] == "retraining vs champion"]
