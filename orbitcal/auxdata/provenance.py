@@ -66,7 +66,7 @@ def tables_provenance(
     Returns
     -------
     dict
-        ``{"span": {"start", "end"}, "reference_field": {...}, "tables": {kind: {file, origin,
+        ``{"span": {"start", "end"}, "tables": {kind: {file, origin,
         source, retrieved_at, sha256, coverage_end, valid_until, status, ...}},
         "warnings": [...]}``;
         ``warnings`` names every table the span runs past (never silently).

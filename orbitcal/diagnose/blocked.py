@@ -135,10 +135,6 @@ class BlockedDesign:
             # A run of consecutive samples (the training blocks) is read through views.
             yield (slice(int(part[0]), int(part[-1]) + 1) if contiguous else part), rows
 
-    def _all_slices(self) -> Iterator[slice]:
-        for start in range(0, self.data.n, self.block_samples):
-            yield slice(start, min(start + self.block_samples, self.data.n))
-
     def _column_scales(self) -> FloatArray:
         b = self.data.b_ref_body_nt / FIELD_SCALE_NT
         # The calibration columns: b_j on one axis's rows and zero on the others (its root mean

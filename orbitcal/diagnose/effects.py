@@ -270,36 +270,18 @@ class DiagnosisData:
         )
 
     @cached_property
-    def speed_itrs_km_s(self) -> FloatArray:
-        """Ground-relative speed |d r_itrs / dt| [km/s]."""
-        v = _time_derivative(self.t_utc_s, self.r_itrs_km)
-        return np.maximum(np.linalg.norm(v, axis=1), 1e-6)
-
-    @cached_property
-    def db_ref_body_ds_nt_km(self) -> FloatArray:
-        """Along-track gradient of the reference field, rotated into the body frame [nT/km].
-
-        The field is differentiated along the track in the Earth-fixed frame (where it is static)
-        and rotated with the measured attitude, so attitude motion does not enter: this is what an
-        along-track position error produces, unlike a time-tag error.
-        """
-        db_itrs = _time_derivative(self.t_utc_s, self.b_ref_itrs_nt) / self.speed_itrs_km_s[:, None]
-        return np.einsum("nij,nj->ni", self.rot_itrs_to_body, db_itrs)
-
-    @cached_property
     def db_ref_body_drtn_nt_km(self) -> FloatArray:
         """Gradients of the reference field along radial, along-track, cross-track [nT/km].
 
         Shape (N, 3, 3): ``[:, :, k]`` is the body-frame field change per km of displacement along
         the k-th of (radial, inertial along-track, orbit normal). An element set that is late or
         early puts the spacecraft elsewhere in its orbit at the same time: the displacement is
-        along the inertial velocity, while the Earth stays where it is. The ground-track
-        derivative (:attr:`db_ref_body_ds_nt_km`) instead follows the velocity relative to the
-        Earth, which is what a time-tag error produces; the two differ by the Earth's rotation
-        (0.46 km/s x cos(latitude) of 7.6 km/s, mostly across track), and after the 12 parameters
-        absorb the attitude term of a steady spin, that difference is all that tells the two
-        effects apart. Central differences of the reference field (``reference_fn``, else the
-        model named ``reference_field``) over +-5 km, rotated into the body frame.
+        along the inertial velocity, while the Earth stays where it is. A time-tag error instead
+        moves the sample along the velocity relative to the Earth; the two differ by the Earth's
+        rotation (0.46 km/s x cos(latitude) of 7.6 km/s, mostly across track), and after the 12
+        parameters absorb the attitude term of a steady spin, that difference is all that tells
+        the two effects apart. Central differences of the reference field (``reference_fn``, else
+        the model named ``reference_field``) over +-5 km, rotated into the body frame.
         """
         field_fn = self.reference_fn
         if field_fn is None:
@@ -339,11 +321,6 @@ class DiagnosisData:
         for k in range(3):
             out[:, :, k] = np.einsum("nij,nj->ni", self.rot_itrs_to_body, grad[:, :, k])
         return out
-
-    @property
-    def db_ref_body_ds_inertial_nt_km(self) -> FloatArray:
-        """Gradient along the inertial along-track direction, body frame [nT/km] (see above)."""
-        return self.db_ref_body_drtn_nt_km[:, :, 1]
 
     @cached_property
     def dipole_axis_body(self) -> FloatArray:
@@ -809,13 +786,6 @@ ATTITUDE_MAX_TERMS = 3
 
 #: Samples per block of the batched period scan (memory ~ periods x block x 8 B per array).
 SCAN_BLOCK_SAMPLES = 4096
-
-
-def _calibration_residual(data: DiagnosisData, train: BoolArray) -> FloatArray:
-    """Residual of the per-axis 12-parameter least-squares fit on ``train``, all samples [nT]."""
-    x = np.column_stack([data.b_ref_body_nt / FIELD_SCALE_NT, np.ones(data.n)])
-    coef = np.linalg.lstsq(x[train], data.b_raw_nt[train], rcond=None)[0]
-    return np.asarray(data.b_raw_nt - x @ coef)
 
 
 def _rotation_columns(data: DiagnosisData) -> FloatArray:
