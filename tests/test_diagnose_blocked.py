@@ -91,7 +91,9 @@ def test_robust_bounded_fit_does_not_depend_on_the_block_size(world, monkeypatch
     a, b = fits
     np.testing.assert_allclose(a.a, b.a, rtol=1e-10, atol=1e-13)
     np.testing.assert_allclose(a.o_nt, b.o_nt, rtol=1e-9, atol=1e-9)
-    for ca, cb in zip(a.coef, b.coef, strict=True):
-        np.testing.assert_allclose(ca, cb, rtol=1e-8, atol=1e-10)
+    # Effect parameters to a millionth of their standard error: the order of the sums moves an
+    # ill-determined one (a clock drift's quadratic term) by ~1e-8 of its value.
+    for ca, cb, cov in zip(a.coef, b.coef, b.coef_cov, strict=True):
+        np.testing.assert_allclose(ca, cb, rtol=0.0, atol=1e-6 * float(np.sqrt(np.diag(cov)).min()))
     assert a.sigma_nt == pytest.approx(b.sigma_nt, rel=1e-9)
     np.testing.assert_allclose(a.cov_cal, b.cov_cal, rtol=1e-7, atol=1e-20)

@@ -30,6 +30,10 @@ IntArray = npt.NDArray[np.intp]
 #: p = 24), stay in the cache while their products are formed.
 FIT_BLOCK_SAMPLES = 2048
 
+#: The columns of the calibration parameters that act on each sensor axis's rows: the matrix row
+#: ``a[i, :]`` (columns ``3 i .. 3 i + 2``) and the offset ``o[i]`` (column ``9 + i``).
+_CAL_COLUMNS: tuple[list[int], ...] = tuple([3 * i, 3 * i + 1, 3 * i + 2, 9 + i] for i in range(3))
+
 
 def _effect_scales(data: DiagnosisData, block: DesignBlock, g: FloatArray) -> FloatArray:
     """Scales of one design block's columns, (p,); computed once per block and data set.
@@ -127,13 +131,21 @@ class BlockedDesign:
         return x
 
     def chunks(self, index: IntArray) -> Iterator[tuple[IntArray | slice, slice]]:
-        """Blocks of the samples ``index`` and the slice of their rows in ``3 index.size`` rows."""
-        contiguous = index.size > 0 and int(index[-1]) - int(index[0]) + 1 == index.size
-        for start in range(0, index.size, self.block_samples):
-            part = index[start : start + self.block_samples]
-            rows = slice(3 * start, 3 * start + 3 * part.size)
-            # A run of consecutive samples (the training blocks) is read through views.
-            yield (slice(int(part[0]), int(part[-1]) + 1) if contiguous else part), rows
+        """Blocks of the samples ``index`` and the slice of their rows in ``3 index.size`` rows.
+
+        Each run of consecutive samples (a training block) is cut into blocks of at most
+        ``block_samples`` and read through views (a slice); a block never spans two runs.
+        """
+        if index.size == 0:
+            return
+        breaks = np.flatnonzero(np.diff(index) != 1) + 1
+        starts = np.r_[0, breaks]
+        stops = np.r_[breaks, index.size]
+        for lo, hi in zip(starts.tolist(), stops.tolist(), strict=True):
+            for start in range(lo, hi, self.block_samples):
+                stop = min(start + self.block_samples, hi)
+                first = int(index[start])
+                yield slice(first, first + stop - start), slice(3 * start, 3 * stop)
 
     def _column_scales(self) -> FloatArray:
         b = self.data.b_ref_body_nt / FIELD_SCALE_NT
@@ -150,27 +162,91 @@ class BlockedDesign:
 
     # -- products ----------------------------------------------------------------------------
 
+    def _cal_rows(self, part: IntArray | slice) -> FloatArray:
+        """Unscaled calibration rows ``(b / FIELD_SCALE_NT, 1)`` of the samples, shape (m, 4).
+
+        Every axis's four calibration columns hold these values on that axis's rows and zeros on
+        the other two, so they are kept once per sample.
+        """
+        b = self.data.b_ref_body_nt[part]
+        c = np.empty((b.shape[0], 4))
+        np.multiply(b, 1.0 / FIELD_SCALE_NT, out=c[:, :3])
+        c[:, 3] = 1.0
+        return c
+
     def normal_equations(
         self, index: IntArray, y: FloatArray, w: FloatArray
     ) -> tuple[FloatArray, FloatArray]:
         """``X' W X`` (p, p) and ``X' W y`` (p,) over the rows of the samples ``index``.
 
-        ``y`` and ``w`` have one value per row, ``3 index.size``.
+        ``y`` and ``w`` have one value per row, ``3 index.size``. The products are formed from
+        the structure of ``X`` and unscaled, then scaled once: per axis, the 4 x 4 calibration
+        block and its coupling to each effect block; each pair of effect blocks over all rows.
+        That is a third of the arithmetic of the dense rows at p = 24, and no row is copied.
         """
+        widths = [g.shape[2] for g in self._g]
+        g_cc = np.zeros((3, 4, 4))
+        g_ce = [np.zeros((3, 4, q)) for q in widths]
+        g_ee = {
+            (j, k): np.zeros((widths[j], widths[k]))
+            for j in range(len(widths))
+            for k in range(j, len(widths))
+        }
+        r_c = np.zeros((3, 4))
+        r_e = [np.zeros(q) for q in widths]
+        for part, rows in self.chunks(index):
+            c = self._cal_rows(part)
+            m = c.shape[0]
+            wr = w[rows]
+            wy = wr * y[rows]
+            wv = wr.reshape(m, 3)
+            wyv = wy.reshape(m, 3)
+            e = [g[part] for g in self._g]
+            for i in range(3):
+                cw = c * wv[:, i, None]
+                g_cc[i] += cw.T @ c
+                r_c[i] += c.T @ wyv[:, i]
+                for j, ej in enumerate(e):
+                    g_ce[j][i] += cw.T @ ej[:, i, :]
+            flat = [ej.reshape(3 * m, -1) for ej in e]
+            for j, fj in enumerate(flat):
+                fw = fj * wr[:, None]
+                r_e[j] += fj.T @ wy
+                for k in range(j, len(flat)):
+                    g_ee[j, k] += fw.T @ flat[k]
         gram = np.zeros((self.p, self.p))
         rhs = np.zeros(self.p)
-        for part, rows in self.chunks(index):
-            x = self.rows(part)
-            xw = x * w[rows, None]
-            gram += x.T @ xw
-            rhs += xw.T @ y[rows]
-        return gram, rhs
+        for i in range(3):
+            idx = _CAL_COLUMNS[i]
+            gram[np.ix_(idx, idx)] = g_cc[i]
+            rhs[idx] = r_c[i]
+        offsets = np.cumsum([12, *widths]).tolist()
+        for j, q in enumerate(widths):
+            cols = slice(offsets[j], offsets[j] + q)
+            for i in range(3):
+                idx = _CAL_COLUMNS[i]
+                gram[idx, cols] = g_ce[j][i]
+                gram[cols, idx] = g_ce[j][i].T
+            rhs[cols] = r_e[j]
+            for k in range(j, len(widths)):
+                other = slice(offsets[k], offsets[k] + widths[k])
+                gram[cols, other] = g_ee[j, k]
+                gram[other, cols] = g_ee[j, k].T
+        inv = 1.0 / self.scale
+        return gram * np.outer(inv, inv), rhs * inv
 
     def residual(self, index: IntArray, y: FloatArray, theta: FloatArray) -> FloatArray:
         """``y - X theta`` over the rows of the samples ``index``, shape (3 index.size,)."""
         out = np.empty(3 * index.size)
+        raw = theta / self.scale  # the parameters of the unscaled columns
+        theta_cal = np.stack([raw[idx] for idx in _CAL_COLUMNS], axis=1)  # (4, 3)
+        widths = [g.shape[2] for g in self._g]
+        offsets = np.cumsum([12, *widths]).tolist()
         for part, rows in self.chunks(index):
-            out[rows] = y[rows] - self.rows(part) @ theta
+            pred = self._cal_rows(part) @ theta_cal
+            for g, lo, q in zip(self._g, offsets, widths, strict=False):
+                pred += g[part] @ raw[lo : lo + q]
+            out[rows] = y[rows] - pred.reshape(-1)
         return out
 
     def lstsq(self, index: IntArray, y: FloatArray, w: FloatArray | None = None) -> FloatArray:
