@@ -68,6 +68,31 @@ def test_blocked_products_equal_the_dense_design(world, block_samples: int) -> N
     )
 
 
+@pytest.mark.parametrize("pattern", ["thinned", "runs_and_singles", "one_sample"])
+def test_products_of_scattered_samples_equal_the_dense_design(world, pattern: str) -> None:
+    """Samples mostly apart (read by index), long runs mixed with single samples (read by
+    views, a single sample as a view of one) and one sample give the dense design's products."""
+    data, _, blocks = world
+    n = data.n
+    if pattern == "thinned":
+        index = np.arange(0, n, 3)
+    elif pattern == "runs_and_singles":
+        index = np.r_[np.arange(10, 400), np.arange(401, 1200, 97), np.arange(1300, n)]
+    else:
+        index = np.array([n // 2])
+    x, _ = _dense(data, blocks)
+    rows = (3 * index[:, None] + np.arange(3)).reshape(-1)
+    xt = x[rows]
+    y = data.b_raw_nt[index].reshape(-1)
+    w = np.random.default_rng(1).uniform(0.0, 1.0, y.size)
+    d = BlockedDesign(data, blocks, block_samples=100)
+    gram, rhs = d.normal_equations(index, y, w)
+    np.testing.assert_allclose(gram, xt.T @ (xt * w[:, None]), rtol=1e-10, atol=1e-9 * gram.max())
+    np.testing.assert_allclose(rhs, (xt * w[:, None]).T @ y, rtol=1e-10, atol=1e-9 * abs(rhs).max())
+    theta = np.random.default_rng(2).normal(size=d.p)
+    np.testing.assert_allclose(d.residual(index, y, theta), y - xt @ theta, rtol=1e-10, atol=1e-8)
+
+
 def test_plain_joint_fit_is_the_dense_normal_equation_solve(world) -> None:
     data, train, blocks = world
     fit = fit_joint(data, train, blocks, robust=False, bounded=False)

@@ -40,7 +40,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy import stats
 
-from orbitcal.arrays import BoolArray, FloatArray
+from orbitcal.arrays import BoolArray, FloatArray, IntArray
 from orbitcal.diagnose.blocked import BlockedDesign
 from orbitcal.diagnose.bounds import consistency_reasons, param_range
 from orbitcal.diagnose.effects import (
@@ -225,7 +225,7 @@ def fit_joint(
         # prior calibration itself), fixed, so that a prior at odds with the data cannot inflate
         # its own weight through the residual.
         if n_rows > 2 * p + 30:
-            r0 = design.residual(index, y, design.lstsq(index, y))
+            r0 = design.residual(index, y, _plain_least_squares(design, index, y))
         else:
             r0 = design.residual(index, y, np.r_[prior_mean[:12], np.zeros(p - 12)])
         noise = max(float(1.4826 * np.median(np.abs(r0 - np.median(r0)))), 1e-6)
@@ -236,7 +236,7 @@ def fit_joint(
         # weighted by the noise of a fit without them (fixed, as for the calibration prior).
         pm, pp = _effect_priors(blocks, scale)
         if np.any(pp > 0.0):
-            r0 = design.residual(index, y, design.lstsq(index, y))
+            r0 = design.residual(index, y, _plain_least_squares(design, index, y))
             noise = max(float(1.4826 * np.median(np.abs(r0 - np.median(r0)))), 1e-6)
             prior_mean = np.where(pp > 0.0, pm, prior_mean)
             prior_precision = prior_precision + pp * noise**2
@@ -298,6 +298,17 @@ def fit_joint(
         coef_cov=coef_cov,
         bounded=bounded,
     )
+
+
+def _plain_least_squares(design: BlockedDesign, index: IntArray, y: FloatArray) -> FloatArray:
+    """Unweighted least-squares parameters from the normal equations (one pass over the rows).
+
+    Used for the residual that sets the noise level of the priors: the columns are unit-scaled,
+    and a direction the data leave open (cut at 1e-13 of the largest singular value) changes the
+    parameters, not the residual.
+    """
+    gram, rhs = design.normal_equations(index, y, np.ones_like(y))
+    return np.asarray(np.linalg.lstsq(gram, rhs, rcond=1e-13)[0], dtype=float)
 
 
 def _scaled_bounds(
@@ -794,6 +805,9 @@ NEAR_TWIN_BIC = 10.0
 #: ones), far inside both margins. [-]
 PAIR_SCREEN_GAIN = 0.5
 PAIR_SCREEN_MARGIN = 0.02
+#: The screen fits every k-th training sample and scores every k-th held-out one, at most this
+#: many of each (the full fits that follow use them all).
+PAIR_SCREEN_SAMPLES = 20_000
 
 #: Effects whose design is found by a scan of the residual (the attitude error's periods): after
 #: other effects are selected they are designed again on what those leave.
@@ -823,6 +837,10 @@ class Selection:
     min_gain: float = 0.03
     tie_tolerance: float = 0.01
     _screen_weights: FloatArray | None = field(default=None, repr=False)
+    _screen_train: BoolArray | None = field(default=None, repr=False)
+    _screen_holdout: IntArray = field(
+        default_factory=lambda: np.zeros(0, dtype=np.intp), repr=False
+    )
 
     def evaluate(
         self, fixed: Sequence[DesignBlock], block: DesignBlock, *, bounded: bool = True
@@ -1040,18 +1058,32 @@ class Selection:
 
     def _screen_huber_weights(self, r_before: FloatArray) -> None:
         """Fixed Huber weights of the screen (k = 2.5 sigma, as :func:`fit_joint`) from the
-        residual of the model without the screened effects."""
+        residual of the model without the screened effects, and the screen's samples: every
+        k-th training and held-out sample, at most ``PAIR_SCREEN_SAMPLES`` of each."""
         r = r_before[self.train]
         sigma = max(float(1.4826 * np.median(np.abs(r - np.median(r)))), 1e-6)
         u = np.abs(r_before) / (2.5 * sigma)
         self._screen_weights = np.where(u <= 1.0, 1.0, 1.0 / np.maximum(u, 1e-12))
+        idx = np.flatnonzero(self.train)
+        step = max(1, -(-idx.size // PAIR_SCREEN_SAMPLES))
+        mask = np.zeros_like(self.train)
+        mask[idx[::step]] = True
+        self._screen_train = mask
+        held = np.flatnonzero(self.holdout)
+        self._screen_holdout = held[:: max(1, -(-held.size // PAIR_SCREEN_SAMPLES))]
 
     def _screen_rms(self, fixed: Sequence[DesignBlock], extra: Sequence[DesignBlock]) -> float:
         """Held-out RMS of ``fixed + extra`` fitted once with the screen's fixed weights."""
-        assert self._screen_weights is not None
+        assert self._screen_weights is not None and self._screen_train is not None
         blocks = [*fixed, *extra]
-        fit = fit_joint(self.data, self.train, blocks, robust=False, weights=self._screen_weights)
-        return norm_rms_nt((self.data.b_raw_nt - fit.predict_nt(self.data))[self.holdout])
+        fit = fit_joint(
+            self.data, self._screen_train, blocks, robust=False, weights=self._screen_weights
+        )
+        idx = self._screen_holdout
+        pred = self.data.b_ref_body_nt[idx] @ fit.a.T + fit.o_nt
+        for k, bl in enumerate(fit.blocks):
+            pred += bl.g[idx] @ fit.coef[k]
+        return norm_rms_nt(self.data.b_raw_nt[idx] - pred)
 
     def backward(self, blocks: Sequence[DesignBlock], names: Sequence[str]) -> str | None:
         """The selected effect that no longer earns its place beside the others, if any.

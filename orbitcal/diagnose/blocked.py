@@ -30,6 +30,9 @@ IntArray = npt.NDArray[np.intp]
 #: p = 24), stay in the cache while their products are formed.
 FIT_BLOCK_SAMPLES = 2048
 
+#: Runs of consecutive samples shorter than this on average are read by index, not by views.
+MIN_RUN_SAMPLES = 64
+
 #: The columns of the calibration parameters that act on each sensor axis's rows: the matrix row
 #: ``a[i, :]`` (columns ``3 i .. 3 i + 2``) and the offset ``o[i]`` (column ``9 + i``).
 _CAL_COLUMNS: tuple[list[int], ...] = tuple([3 * i, 3 * i + 1, 3 * i + 2, 9 + i] for i in range(3))
@@ -133,12 +136,19 @@ class BlockedDesign:
     def chunks(self, index: IntArray) -> Iterator[tuple[IntArray | slice, slice]]:
         """Blocks of the samples ``index`` and the slice of their rows in ``3 index.size`` rows.
 
-        Each run of consecutive samples (a training block) is cut into blocks of at most
-        ``block_samples`` and read through views (a slice); a block never spans two runs.
+        Runs of consecutive samples (the training blocks) are cut into blocks of at most
+        ``block_samples`` and read through views (a slice); a block never spans two runs. Samples
+        mostly apart (runs shorter than :data:`MIN_RUN_SAMPLES` on average, e.g. a thinned
+        selection) are read in blocks of ``block_samples`` by index instead.
         """
         if index.size == 0:
             return
         breaks = np.flatnonzero(np.diff(index) != 1) + 1
+        if index.size < MIN_RUN_SAMPLES * (breaks.size + 1):
+            for start in range(0, index.size, self.block_samples):
+                part = index[start : start + self.block_samples]
+                yield part, slice(3 * start, 3 * start + 3 * part.size)
+            return
         starts = np.r_[0, breaks]
         stops = np.r_[breaks, index.size]
         for lo, hi in zip(starts.tolist(), stops.tolist(), strict=True):
