@@ -38,7 +38,6 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy import stats
 
 from orbitcal.arrays import BoolArray, FloatArray, IntArray
 from orbitcal.diagnose.blocked import BlockedDesign
@@ -50,6 +49,7 @@ from orbitcal.diagnose.effects import (
     DiagnosisData,
     Effect,
 )
+from orbitcal.diagnose.signed_rank import signed_rank_greater_p
 from orbitcal.metrics import norm_rms_nt
 
 __all__ = [
@@ -704,8 +704,7 @@ def _chunk_test(r_before: FloatArray, r_after: FloatArray, n_chunks: int) -> tup
     mean = float(np.mean(d))
     if np.all(d == 0.0):
         return 1.0, mean
-    res = stats.wilcoxon(d, alternative="greater", zero_method="zsplit")
-    return float(res.pvalue), mean
+    return signed_rank_greater_p(d), mean
 
 
 #: Fewest chunks (of >= 3 samples) a localised effect's support is tested on.
