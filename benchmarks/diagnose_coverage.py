@@ -29,8 +29,7 @@ import numpy as np
 
 
 def _world(kind: str, i: int, rng: np.random.Generator, tle_text: str) -> dict[str, Any]:
-    from threadpoolctl import threadpool_limits
-
+    from orbitcal.blas import one_blas_thread
     from orbitcal.diagnose import attribute
     from orbitcal.diagnose.api import diagnosis_data
     from orbitcal.orbit import Orbit
@@ -65,7 +64,7 @@ def _world(kind: str, i: int, rng: np.random.Generator, tle_text: str) -> dict[s
         amp = float(rng.uniform(0.7, 1.5))
         effect = make_effect("crustal_field", model="LCS-1", scale=amp)
     period_s = 86400.0 / float(tle.line2[52:63])
-    with threadpool_limits(1):
+    with one_blas_thread():
         world = simulate_world(
             tle,
             start_utc_s=start,

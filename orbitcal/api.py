@@ -255,8 +255,8 @@ def diagnose_table(
         ``verdict``, ranked ``effects`` with their held-out shrink, ``baseline`` and ``final``.
     """
     import numpy as np
-    from threadpoolctl import threadpool_limits
 
+    from orbitcal.blas import one_blas_thread
     from orbitcal.diagnose.api import diagnose
 
     prior = None
@@ -264,7 +264,7 @@ def diagnose_table(
         from orbitcal.diagnose.prior import prior_from_document
 
         prior = prior_from_document(dict(calibration))
-    with threadpool_limits(1):
+    with one_blas_thread():
         return diagnose(
             telemetry,
             orbit=orbit,

@@ -63,8 +63,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 def run(args: argparse.Namespace) -> int:
     """Execute ``orbitcal diagnose``; bad input raises CliError or a typed ValueError (exit 2)."""
     import numpy as np
-    from threadpoolctl import threadpool_limits
 
+    from orbitcal.blas import one_blas_thread
     from orbitcal.diagnose.api import diagnose_parts, diagnosis_data
     from orbitcal.diagnose.report import report_html
     from orbitcal.field import get_field
@@ -86,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
             sigma_a=args.prior_sigma_matrix,
             sigma_o_nt=args.prior_sigma_offset,
         )
-    with threadpool_limits(1):
+    with one_blas_thread():
         data = diagnosis_data(
             tel,
             orbit=orbit,

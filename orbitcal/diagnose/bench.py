@@ -407,10 +407,10 @@ def run_benchmark(
 
     BLAS is limited to one thread for the run (tiny fits on a shared machine).
     """
-    from threadpoolctl import threadpool_limits
+    from orbitcal.blas import one_blas_thread
 
     results = []
-    with threadpool_limits(1):
+    with one_blas_thread():
         for case in plan_cases(n_cases, seed=seed):
             out = run_case(case, tle_text=tle_text, n_orbits=n_orbits, cadence_s=cadence_s)
             results.append(out)
@@ -639,10 +639,10 @@ def run_compound_benchmark(
     progress: Callable[[int, dict[str, Any]], None] | None = None,
 ) -> dict[str, Any]:
     """Run ``n_cases`` compound worlds; returns ``{"summary", "cases", "settings"}``."""
-    from threadpoolctl import threadpool_limits
+    from orbitcal.blas import one_blas_thread
 
     results = []
-    with threadpool_limits(1):
+    with one_blas_thread():
         for case in plan_compound_cases(n_cases, seed=seed):
             out = run_compound_case(case, tle_text=tle_text, n_orbits=n_orbits, cadence_s=cadence_s)
             results.append(out)
