@@ -110,6 +110,8 @@ class JointFit:
         Covariance of each block's parameters (white residuals, as ``cov_cal``).
     bounded : bool
         Whether the effect parameters were kept inside their physical ranges.
+    train_rss_nt2 : float
+        Sum of the squared (unweighted) residual over the fitted samples [nT^2].
     """
 
     a: FloatArray
@@ -120,6 +122,7 @@ class JointFit:
     cov_cal: FloatArray
     coef_cov: list[FloatArray] = field(default_factory=list)
     bounded: bool = True
+    train_rss_nt2: float = float("nan")
 
     def at_bounds(self, k: int, *, rel_tol: float = 1e-4) -> list[str]:
         """Names of block ``k``'s parameters that sit on the edge of their physical range."""
@@ -241,6 +244,7 @@ def fit_joint(
             prior_mean = np.where(pp > 0.0, pm, prior_mean)
             prior_precision = prior_precision + pp * noise**2
     theta_prev: FloatArray | None = None
+    r = y  # the residual of theta = 0, were there no iteration
     for it in range(iterations if robust else 1):
         # Normal equations accumulated a block of samples at a time (memory bounded by the
         # block, not by the number of samples).
@@ -297,6 +301,7 @@ def fit_joint(
         cov_cal=cov_cal,
         coef_cov=coef_cov,
         bounded=bounded,
+        train_rss_nt2=float(r @ r),
     )
 
 
@@ -375,10 +380,9 @@ def _train_bic(
     fit = fit_joint(data, train, blocks, robust=False, bounded=bounded)
     if blocks and _inconsistent(fit, len(blocks) - 1):
         return float("inf")
-    r = data.b_raw_nt[train] - fit.predict_nt(data)[train]
-    n = r.size
+    n = 3 * int(train.sum())
     k = 12 + sum(len(b.names) for b in blocks)
-    return float(n * np.log(max(float(np.sum(r**2)), 1e-300) / n) + k * np.log(n))
+    return float(n * np.log(max(fit.train_rss_nt2, 1e-300) / n) + k * np.log(n))
 
 
 def _bic(fit: JointFit, residual_nt: FloatArray, train: BoolArray) -> float:
