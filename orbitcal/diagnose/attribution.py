@@ -385,12 +385,19 @@ def _train_bic(
     return float(n * np.log(max(fit.train_rss_nt2, 1e-300) / n) + k * np.log(n))
 
 
-def _bic(fit: JointFit, residual_nt: FloatArray, train: BoolArray) -> float:
-    """BIC of a fit from its residual on the training samples."""
+def _bic(fit: JointFit, residual_nt: FloatArray, train: BoolArray, inflation: float = 1.0) -> float:
+    """BIC of a fit from its residual on the training samples.
+
+    ``inflation`` (>= 1) divides the number of residuals into an effective number of independent
+    ones (:func:`_autocorr_inflation`): with a misfit correlated over many samples, the count of
+    rows overstates the evidence of a lower residual and a flexible model wins on the training
+    blocks what it does not hold on the held-out ones.
+    """
     n = 3 * int(train.sum())
+    n_eff = max(n / max(inflation, 1.0), 1.0)
     rss = max(float(np.sum(residual_nt[train] ** 2)), 1e-300)
     k = 12 + sum(len(b.names) for b in fit.blocks)
-    return float(n * np.log(rss / n) + k * np.log(n))
+    return float(n_eff * np.log(rss / n) + k * np.log(n_eff))
 
 
 def _resolve(
@@ -988,18 +995,26 @@ class Selection:
                 >= self.alpha
             )
         ]
-        best = min(tied, key=lambda c: _bic(c.fit, c.residual_nt, self.train))
+        # The BIC counts the training residuals as independent only as far as they are: the
+        # autocorrelation of the best held-out model's training residual sets the effective
+        # number for every tied model alike.
+        if len(tied) > 1:
+            r_top = top.residual_nt[self.train]
+            inflation = max(_autocorr_inflation(r_top[:, i]) for i in range(3))
+        else:
+            inflation = 1.0
+        bic = {c.name: _bic(c.fit, c.residual_nt, self.train, inflation) for c in tied}
+        best = min(tied, key=lambda c: bic[c.name])
         # Models the data cannot tell apart are reported with the one named (e.g. under steady
         # attitude rates a time-tag error and an along-track orbit error differ only by the
         # Earth's rotation once the 12 parameters absorb the attitude term).
-        bic_best = _bic(best.fit, best.residual_nt, self.train)
         twins = sorted(
             c.name
             for c in tied
             if c.name != best.name
             and (
                 _twins(c.fit, c.residual_nt, best.fit, best.residual_nt, self.train)
-                or _bic(c.fit, c.residual_nt, self.train) - bic_best < NEAR_TWIN_BIC
+                or bic[c.name] - bic[best.name] < NEAR_TWIN_BIC
             )
         )
         return best, twins
