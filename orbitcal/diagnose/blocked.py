@@ -5,7 +5,8 @@ A joint fit of the 12-parameter calibration and ``p - 12`` effect parameters sta
 that matrix and its reweighted copies grow with ``N`` (19 kB per sample at 86,400 samples), so a
 week at 1 Hz would not fit in memory. :class:`BlockedDesign` instead builds the rows of
 ``FIT_BLOCK_SAMPLES`` samples at a time and accumulates what the fit needs from them: the column
-scales, the normal equations ``X' W X`` and ``X' W y``, residuals ``y - X theta`` and, for the
+scales, the normal equations ``X' W X`` and ``X' W y`` and residuals ``y - X theta`` (both from the
+design's structure, without forming its rows: :meth:`BlockedDesign.normal_equations`) and, for the
 few least-squares solves without weights, the triangular factor of a QR decomposition updated
 block by block (``[R; X_b] = Q' R'``). Memory is then bounded by the block size; the results equal
 those of the dense matrix up to the order of the floating-point sums.
@@ -192,7 +193,8 @@ class BlockedDesign:
         ``y`` and ``w`` have one value per row, ``3 index.size``. The products are formed from
         the structure of ``X`` and unscaled, then scaled once: per axis, the 4 x 4 calibration
         block and its coupling to each effect block; each pair of effect blocks over all rows.
-        That is a third of the arithmetic of the dense rows at p = 24, and no row is copied.
+        That is a third of the arithmetic of the dense rows at p = 24, and the dense rows (two
+        thirds zeros) are never assembled.
         """
         widths = [g.shape[2] for g in self._g]
         g_cc = np.zeros((3, 4, 4))
