@@ -68,7 +68,9 @@ def run(args: argparse.Namespace) -> int:
     from orbitcal.diagnose.api import diagnose_parts, diagnosis_data
     from orbitcal.diagnose.report import report_html
     from orbitcal.field import get_field
+    from orbitcal.memory import release_freed_arrays
 
+    release_freed_arrays()
     get_field(args.field)  # unknown names fail before any reading
     tel = load_table(
         args,

@@ -136,8 +136,9 @@ class JointFit:
 
     def effect_nt(self, k: int, g: FloatArray | None = None) -> FloatArray:
         """The field block ``k`` adds at every sample [nT], shape (N, 3)."""
-        gk = self.blocks[k].g if g is None else g
-        return np.asarray(gk @ self.coef[k])
+        if g is not None:
+            return np.asarray(g @ self.coef[k])
+        return self.blocks[k].apply(self.coef[k])
 
     def predict_nt(self, data: DiagnosisData) -> FloatArray:
         """Modelled raw measurement for all samples of ``data`` (the fitted sample set) [nT]."""
@@ -922,7 +923,7 @@ class Selection:
             )
             less = dataclasses.replace(self.data, b_raw_nt=self.data.b_raw_nt - others)
             again = self.effects[name].design(less, self.train)
-            if again is not None and np.all(np.isfinite(again.g)):
+            if again is not None and again.all_finite():
                 block = again
         fit, r, rms = self.evaluate(fixed, block)
         if rms_before is None:
@@ -1100,7 +1101,7 @@ class Selection:
         idx = self._screen_holdout
         pred = self.data.b_ref_body_nt[idx] @ fit.a.T + fit.o_nt
         for k, bl in enumerate(fit.blocks):
-            pred += bl.g[idx] @ fit.coef[k]
+            pred += bl.rows(idx) @ fit.coef[k]
         return norm_rms_nt(self.data.b_raw_nt[idx] - pred)
 
     def backward(self, blocks: Sequence[DesignBlock], names: Sequence[str]) -> str | None:
@@ -1195,7 +1196,7 @@ def attribute(
     designs: dict[str, DesignBlock] = {}
     for eff in candidates:
         block = eff.design(data, train)
-        if block is not None and np.all(np.isfinite(block.g)):
+        if block is not None and block.all_finite():
             designs[eff.name] = block
     sel = Selection(
         data,

@@ -39,7 +39,7 @@ MIN_RUN_SAMPLES = 64
 _CAL_COLUMNS: tuple[list[int], ...] = tuple([3 * i, 3 * i + 1, 3 * i + 2, 9 + i] for i in range(3))
 
 
-def _effect_scales(data: DiagnosisData, block: DesignBlock, g: FloatArray) -> FloatArray:
+def _effect_scales(data: DiagnosisData, block: DesignBlock) -> FloatArray:
     """Scales of one design block's columns, (p,); computed once per block and data set.
 
     Effect columns are scaled by the part the calibration cannot absorb, so the ridge acts on
@@ -56,18 +56,18 @@ def _effect_scales(data: DiagnosisData, block: DesignBlock, g: FloatArray) -> Fl
     if hit is not None and hit[0]() is data:
         return hit[1]
     n_rows = 3 * data.n
-    q = g.shape[2]
+    q = block.width
     q_cal = data.calibration_q
     step = FIT_BLOCK_SAMPLES
     sum_sq = np.zeros(q)
     q_eff = np.zeros((12, q))
     for a in range(0, data.n, step):
-        eff = g[a : a + step].reshape(-1, q)
+        eff = block.rows(slice(a, a + step)).reshape(-1, q)
         sum_sq += np.sum(eff**2, axis=0)
         q_eff += q_cal[3 * a : 3 * a + eff.shape[0]].T @ eff
     rest_sq = np.zeros(q)
     for a in range(0, data.n, step):
-        eff = g[a : a + step].reshape(-1, q)
+        eff = block.rows(slice(a, a + step)).reshape(-1, q)
         rest_sq += np.sum((eff - q_cal[3 * a : 3 * a + eff.shape[0]] @ q_eff) ** 2, axis=0)
     raw = np.sqrt(sum_sq / n_rows)
     scale = np.maximum(np.sqrt(rest_sq / n_rows), 1e-6 * raw)
@@ -103,9 +103,6 @@ class BlockedDesign:
     ) -> None:
         self.data = data
         self.blocks = list(blocks)
-        # Each block's regressors once for the fit (a lazily built block would be rebuilt on
-        # every access).
-        self._g = [bl.g for bl in self.blocks]
         self.p = 12 + sum(len(bl.names) for bl in self.blocks)
         self.block_samples = int(FIT_BLOCK_SAMPLES if block_samples is None else block_samples)
         self.scale = self._column_scales()
@@ -122,9 +119,9 @@ class BlockedDesign:
             x[:, i, 3 * i : 3 * i + 3] = b
             x[:, i, 9 + i] = 1.0
         col = 12
-        for g in self._g:
-            q = g.shape[2]
-            x[:, :, col : col + q] = g[index]
+        for bl in self.blocks:
+            q = bl.width
+            x[:, :, col : col + q] = bl.rows(index)
             col += q
         return x.reshape(3 * m, self.p)
 
@@ -164,9 +161,7 @@ class BlockedDesign:
         # square over the 3N rows), then an offset of 1 on one axis's rows (sqrt(1/3)).
         rms_b = np.sqrt(np.sum(b**2, axis=0) / (3 * self.data.n))
         cal = np.r_[np.tile(rms_b, 3), np.full(3, np.sqrt(1.0 / 3.0))]
-        effects = [
-            _effect_scales(self.data, bl, g) for bl, g in zip(self.blocks, self._g, strict=True)
-        ]
+        effects = [_effect_scales(self.data, bl) for bl in self.blocks]
         scale = np.concatenate([cal, *effects])
         scale[scale == 0.0] = 1.0
         return scale
@@ -196,7 +191,7 @@ class BlockedDesign:
         That is a third of the arithmetic of the dense rows at p = 24, and the dense rows (two
         thirds zeros) are never assembled.
         """
-        widths = [g.shape[2] for g in self._g]
+        widths = [bl.width for bl in self.blocks]
         g_cc = np.zeros((3, 4, 4))
         g_ce = [np.zeros((3, 4, q)) for q in widths]
         g_ee = {
@@ -213,7 +208,7 @@ class BlockedDesign:
             wy = wr * y[rows]
             wv = wr.reshape(m, 3)
             wyv = wy.reshape(m, 3)
-            e = [g[part] for g in self._g]
+            e = [bl.rows(part) for bl in self.blocks]
             for i in range(3):
                 cw = c * wv[:, i, None]
                 g_cc[i] += cw.T @ c
@@ -252,12 +247,12 @@ class BlockedDesign:
         out = np.empty(3 * index.size)
         raw = theta / self.scale  # the parameters of the unscaled columns
         theta_cal = np.stack([raw[idx] for idx in _CAL_COLUMNS], axis=1)  # (4, 3)
-        widths = [g.shape[2] for g in self._g]
+        widths = [bl.width for bl in self.blocks]
         offsets = np.cumsum([12, *widths]).tolist()
         for part, rows in self.chunks(index):
             pred = self._cal_rows(part) @ theta_cal
-            for g, lo, q in zip(self._g, offsets, widths, strict=False):
-                pred += g[part] @ raw[lo : lo + q]
+            for bl, lo, q in zip(self.blocks, offsets, widths, strict=False):
+                pred += bl.rows(part) @ raw[lo : lo + q]
             out[rows] = y[rows] - pred.reshape(-1)
         return out
 

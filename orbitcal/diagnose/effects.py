@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import contextlib
 import itertools
-import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property, partial
@@ -32,6 +31,15 @@ import numpy as np
 import numpy.typing as npt
 
 from orbitcal.arrays import BoolArray, FloatArray
+from orbitcal.diagnose.columns import (
+    Columns,
+    Factor,
+    FunctionColumns,
+    Index,
+    PerAxisColumns,
+    ScaledVectorColumns,
+    chunk_slices,
+)
 from orbitcal.diagnose.prior import CalibrationPrior
 from orbitcal.diagnose.track import along_track
 from orbitcal.geomag import dipole_axis_itrs, magnetic_latitude_deg
@@ -391,9 +399,10 @@ class DesignBlock:
 
     Attributes
     ----------
-    source : ndarray, shape (N, 3, p), or callable
-        The regressors, or a function that builds them when asked (alternatives of which only
-        one is kept, so that they need not all be held at once: memory grows with N).
+    source : ndarray, shape (N, 3, p), or Columns
+        The regressors, or (:mod:`orbitcal.diagnose.columns`) their factors, from which the rows
+        of the samples asked for are built: most blocks are products of quantities held anyway,
+        and held whole every candidate's every variant would grow with N.
     names : list of str
         Parameter names with their units, e.g. ``"dt_s"``.
     variant : str
@@ -403,39 +412,47 @@ class DesignBlock:
         blocks best (never the held-out ones).
     """
 
-    source: FloatArray | Callable[[], FloatArray]
+    source: FloatArray | Columns
     names: list[str]
     variant: str = ""
     alternatives: Sequence[DesignBlock] = ()
 
     @property
+    def n(self) -> int:
+        """Number of samples."""
+        return int(self.source.n if callable(self.source) else self.source.shape[0])
+
+    @property
+    def width(self) -> int:
+        """Number of parameters ``p``."""
+        return len(self.names)
+
+    def rows(self, index: Index) -> FloatArray:
+        """Regressors of the samples ``index``, shape (m, 3, p); parameter ``k`` adds
+        ``c[k] * rows[:, :, k]`` [nT] in the sensor/body frame."""
+        if callable(self.source):
+            return self.source(index)
+        return self.source[index]
+
+    @property
     def g(self) -> FloatArray:
-        """Regressors in the sensor/body frame, shape (N, 3, p); parameter ``k`` adds
-        ``c[k] * g[:, :, k]`` [nT]. When :attr:`source` is a function, the last
-        ``LAZY_BLOCKS_KEPT`` blocks built are kept (a pair of effects fitted together again and
-        again is not rebuilt) and older ones are built again when asked for."""
+        """All regressors, shape (N, 3, p) (built whole: for small data and checks)."""
+        return self.rows(slice(None))
+
+    def apply(self, coef: FloatArray) -> FloatArray:
+        """The field ``G @ coef`` at every sample [nT], shape (N, 3), a block at a time."""
         if not callable(self.source):
-            return self.source
-        built = self.__dict__.get("_built")
-        if built is None:
-            built = self.source()
-            _keep_built(self, built)
-        return np.asarray(built)
+            return np.asarray(self.source @ coef)
+        out = np.empty((self.n, 3))
+        for part in chunk_slices(self.n):
+            out[part] = self.rows(part) @ coef
+        return out
 
-
-#: How many lazily built design blocks keep their regressors (memory: that many blocks).
-LAZY_BLOCKS_KEPT = 2
-_KEPT: list[weakref.ref[DesignBlock]] = []
-
-
-def _keep_built(block: DesignBlock, g: FloatArray) -> None:
-    """Keep ``g`` with ``block``; the oldest kept block beyond ``LAZY_BLOCKS_KEPT`` drops its."""
-    block.__dict__["_built"] = g
-    _KEPT.append(weakref.ref(block))
-    while len(_KEPT) > LAZY_BLOCKS_KEPT:
-        old = _KEPT.pop(0)()
-        if old is not None:
-            old.__dict__.pop("_built", None)
+    def all_finite(self) -> bool:
+        """True when every regressor is finite (checked a block of samples at a time)."""
+        if not callable(self.source):
+            return bool(np.all(np.isfinite(self.source)))
+        return all(bool(np.all(np.isfinite(self.rows(p)))) for p in chunk_slices(self.n))
 
 
 DesignFn = Callable[[DiagnosisData, BoolArray], DesignBlock | None]
@@ -472,24 +489,6 @@ def _tau_days(data: DiagnosisData, train: BoolArray) -> FloatArray:
     return np.asarray((data.t_utc_s - t0) / SECONDS_PER_DAY)
 
 
-def _per_axis(columns: Sequence[FloatArray]) -> FloatArray:
-    """Regressors that act on one axis each: for every column x and axis i, x e_i."""
-    n = columns[0].shape[0]
-    g = np.zeros((n, 3, 3 * len(columns)))
-    for k, x in enumerate(columns):
-        for i in range(3):
-            g[:, i, 3 * k + i] = x
-    return g
-
-
-def _diag_rows(x: FloatArray) -> FloatArray:
-    """(N, 3) -> (N, 3, 3): per-sample diagonal matrices (axis i scaled by x[:, i])."""
-    out = np.zeros((x.shape[0], 3, 3))
-    idx = np.arange(3)
-    out[:, idx, idx] = x
-    return out
-
-
 def _varies(x: FloatArray | None, *, tol: float = 1e-9) -> bool:
     return x is not None and bool(np.all(np.isfinite(x))) and float(np.std(x)) > tol
 
@@ -499,8 +498,7 @@ def _design_temperature(data: DiagnosisData, train: BoolArray) -> DesignBlock | 
     if temp is None or not _varies(temp):
         return None
     dtemp = temp - float(np.mean(temp[train]))
-    scaled = data.b_ref_body_nt / FIELD_SCALE_NT
-    g = np.concatenate([_per_axis([dtemp]), _diag_rows(dtemp[:, None] * scaled)], axis=2)
+    g = PerAxisColumns(data.n, [dtemp, partial(_scaled_by, data.b_ref_body_nt, dtemp)])
     names = [f"offset_{a}_nt_per_degc" for a in "xyz"] + [
         f"scale_{a}_per_degc_x{FIELD_SCALE_NT:.0e}" for a in "xyz"
     ]
@@ -511,12 +509,11 @@ def _design_magnetorquer(data: DiagnosisData, train: BoolArray) -> DesignBlock |
     cols = [data.hk(f"mtq_{a}") for a in "xyz"]
     if all(c is None or not _varies(c) for c in cols):
         return None
-    m = np.stack([c if c is not None else np.zeros(data.n) for c in cols], axis=1)
-    g = np.zeros((data.n, 3, 9))
+    kinds = [c if c is not None else np.zeros(data.n) for c in cols]
+    g = PerAxisColumns(data.n, kinds, axis_major=True)
     names = []
     for i in range(3):
         for j in range(3):
-            g[:, i, 3 * i + j] = m[:, j]
             names.append(f"coupling_{'xyz'[i]}{'xyz'[j]}_nt_per_am2")
     return DesignBlock(g, names)
 
@@ -532,7 +529,9 @@ def _design_time_offset(data: DiagnosisData, train: BoolArray) -> DesignBlock | 
         ["dt_s"],
         alternatives=(
             DesignBlock(
-                np.stack([first, second], axis=2), ["dt_s", "dt_squared_s2"], "second_order"
+                ScaledVectorColumns(data.n, [first, second], [None, None]),
+                ["dt_s", "dt_squared_s2"],
+                "second_order",
             ),
         ),
     )
@@ -549,7 +548,7 @@ def _design_external(data: DiagnosisData, train: BoolArray) -> DesignBlock | Non
     tau = _tau_days(data, train)
     options = [
         DesignBlock(
-            np.stack([axis, axis * tau[:, None]], axis=2),
+            ScaledVectorColumns(data.n, [axis, axis], [None, tau]),
             ["uniform_along_dipole_nt", "uniform_trend_nt_per_day"],
             variant="dipole_axis",
         )
@@ -557,11 +556,12 @@ def _design_external(data: DiagnosisData, train: BoolArray) -> DesignBlock | Non
     # A storm's recovery phase: the ring-current field decays as exp(-t / tau) with tau of a few
     # to twenty hours (Burton et al. 1975: 7.7 h; O'Brien & McPherron 2000: 3-20 h), which a
     # linear trend extrapolates badly over the held-out blocks; tau from a grid, by training BIC.
-    # Built when the fit asks for them (held at once they grow with N: 290 MB at a week).
+    t_rel_s = data.t_utc_s - float(data.t_utc_s[0])
     for tau_h in EXTERNAL_RECOVERY_TIMES_H:
+        decay = partial(_recovery_decay, t_rel_s, tau_h)
         options.append(
             DesignBlock(
-                partial(_recovery_columns, data, tau_h),
+                ScaledVectorColumns(data.n, [axis, axis], [None, decay]),
                 ["uniform_along_dipole_nt", "uniform_recovering_nt"],
                 variant=f"recovery_{tau_h:.3g}h",
             )
@@ -570,7 +570,7 @@ def _design_external(data: DiagnosisData, train: BoolArray) -> DesignBlock | Non
     if rc is not None and _varies(rc[train], tol=1.0):
         options.append(
             DesignBlock(
-                np.stack([axis, axis * (rc - float(np.mean(rc[train])))[:, None]], axis=2),
+                ScaledVectorColumns(data.n, [axis, axis], [None, rc - float(np.mean(rc[train]))]),
                 ["uniform_along_dipole_nt", "rc_coefficient"],
                 variant="rc_index",
             )
@@ -578,7 +578,7 @@ def _design_external(data: DiagnosisData, train: BoolArray) -> DesignBlock | Non
     if data.b_ext_body_nt is not None and _varies(data.b_ext_body_nt[train, 0], tol=1e-3):
         options.append(
             DesignBlock(
-                np.stack([axis, data.b_ext_body_nt], axis=2),
+                ScaledVectorColumns(data.n, [axis, data.b_ext_body_nt], [None, None]),
                 ["uniform_along_dipole_nt", "rc_model_scale"],
                 variant="rc_model",
             )
@@ -586,20 +586,28 @@ def _design_external(data: DiagnosisData, train: BoolArray) -> DesignBlock | Non
         # The RC index is hourly: a storm's ring current also changes within the hour.
         options.append(
             DesignBlock(
-                np.stack([axis, data.b_ext_body_nt, axis * tau[:, None]], axis=2),
+                ScaledVectorColumns(data.n, [axis, data.b_ext_body_nt, axis], [None, None, tau]),
                 ["uniform_along_dipole_nt", "rc_model_scale", "uniform_trend_nt_per_day"],
                 variant="rc_model+trend",
             )
         )
-    return DesignBlock(options[0].g, options[0].names, options[0].variant, tuple(options[1:]))
+    first = options[0]
+    return DesignBlock(first.source, first.names, first.variant, tuple(options[1:]))
 
 
-def _recovery_columns(data: DiagnosisData, tau_h: float) -> FloatArray:
-    """The dipole-axis field and its recovery-phase decay ``exp(-t / tau)``, (N, 3, 2)."""
-    axis = data.dipole_axis_body
-    t_rel_s = data.t_utc_s - float(data.t_utc_s[0])
-    decay = np.exp(-t_rel_s / (tau_h * 3600.0))
-    return np.stack([axis, axis * decay[:, None]], axis=2)
+def _recovery_decay(t_rel_s: FloatArray, tau_h: float, index: Index) -> FloatArray:
+    """The recovery-phase decay ``exp(-t / tau)`` of the samples ``index`` [-]."""
+    return np.asarray(np.exp(-t_rel_s[index] / (tau_h * 3600.0)))
+
+
+def _scaled_by(b_nt: FloatArray, x: FloatArray, index: Index) -> FloatArray:
+    """``x * b / FIELD_SCALE_NT`` of the samples ``index``, (m, 3)."""
+    return np.asarray(x[index][:, None] * (b_nt[index] / FIELD_SCALE_NT))
+
+
+def _field_power(b_nt: FloatArray, power: int, index: Index) -> FloatArray:
+    """``(b / FIELD_SCALE_NT) ** power`` of the samples ``index``, (m, 3)."""
+    return np.asarray((b_nt[index] / FIELD_SCALE_NT) ** power)
 
 
 def _design_crustal(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
@@ -626,18 +634,12 @@ def _design_sun(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
         # With eclipses in the data the sunlit offset is separable from the calibration offset.
         cols = [lit, *cols]
         names = [f"sunlit_offset_{a}_nt" for a in "xyz"] + names
-    return DesignBlock(_per_axis(cols), names)
+    return DesignBlock(PerAxisColumns(data.n, cols), names)
 
 
 def _design_nonlinearity(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
-    b = data.b_ref_body_nt / FIELD_SCALE_NT
-    g = np.concatenate(
-        [
-            _diag_rows(b**2),
-            _diag_rows(b**3),
-        ],
-        axis=2,
-    )
+    b = data.b_ref_body_nt
+    g = PerAxisColumns(data.n, [partial(_field_power, b, 2), partial(_field_power, b, 3)])
     names = [f"quadratic_{a}_nt" for a in "xyz"] + [f"cubic_{a}_nt" for a in "xyz"]
     return DesignBlock(g, names)
 
@@ -649,7 +651,7 @@ def _design_orbit(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
     grad = grads[:, :, 1]
     tau = _tau_days(data, train)
     growing = DesignBlock(
-        np.stack([grad, grad * tau[:, None]], axis=2),
+        ScaledVectorColumns(data.n, [grad, grad], [None, tau]),
         ["along_track_km", "along_track_rate_km_per_day"],
         variant="growing",
     )
@@ -657,22 +659,13 @@ def _design_orbit(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
     # along-track error grows; an eccentricity error adds once-per-rev radial and (twice as large)
     # along-track terms, an inclination or node error once-per-rev cross-track terms.
     u = data.orbit_phase_rad
-    c, sn = np.cos(u)[:, None], np.sin(u)[:, None]
+    c, sn = np.cos(u), np.sin(u)
     rad, nrm = grads[:, :, 0], grads[:, :, 2]
     rtn = DesignBlock(
-        np.stack(
-            [
-                grad,
-                grad * tau[:, None],
-                grad * c,
-                grad * sn,
-                rad,
-                rad * c,
-                rad * sn,
-                nrm * c,
-                nrm * sn,
-            ],
-            axis=2,
+        ScaledVectorColumns(
+            data.n,
+            [grad, grad, grad, grad, rad, rad, rad, nrm, nrm],
+            [None, tau, c, sn, None, c, sn, c, sn],
         ),
         [
             "along_track_km",
@@ -694,14 +687,10 @@ def _design_orbit(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
 
 def _design_drift(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
     tau = _tau_days(data, train)
-    scaled = data.b_ref_body_nt / FIELD_SCALE_NT
+    b = data.b_ref_body_nt
     names_b = [f"bias_{a}" for a in "xyz"]
     names_s = [f"scale_{a}_x{FIELD_SCALE_NT:.0e}" for a in "xyz"]
-
-    def block(x: FloatArray) -> FloatArray:
-        return np.concatenate([_per_axis([x]), _diag_rows(x[:, None] * scaled)], axis=2)
-
-    trend = block(tau)
+    trend = PerAxisColumns(data.n, [tau, partial(_scaled_by, b, tau)])
     best = DesignBlock(trend, [n + "_nt_per_day" for n in names_b + names_s], variant="trend")
     # A step at one of ~20 candidate times inside the training span, chosen on training only by the
     # residual of the joint fit (done by the caller through ``choose_variant``).
@@ -711,17 +700,26 @@ def _design_drift(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
         return best
     names = [n + "_step_nt" for n in names_b + names_s] + [n + "_nt_per_day" for n in names_b]
 
-    def step_at(ts: float) -> FloatArray:
-        h = (data.t_utc_s >= ts).astype(float)
-        return np.concatenate([block(h), _per_axis([tau])], axis=2)
-
-    # Built when the fit asks for them: 17 step designs held at once took 300 MB at 86,400
-    # samples.
     steps = []
     for frac in np.linspace(0.1, 0.9, 17):
         ts = float(t_train[0] + frac * span)
-        steps.append(DesignBlock(partial(step_at, ts), names, variant=f"step@{ts:.0f}+trend"))
-    return DesignBlock(best.g, best.names, best.variant, alternatives=tuple(steps))
+        step = partial(_step_at, data.t_utc_s, ts)
+        kinds: list[Factor] = [step, partial(_scaled_by_step, b, data.t_utc_s, ts), tau]
+        steps.append(
+            DesignBlock(PerAxisColumns(data.n, kinds), names, variant=f"step@{ts:.0f}+trend")
+        )
+    return DesignBlock(best.source, best.names, best.variant, alternatives=tuple(steps))
+
+
+def _step_at(t_s: FloatArray, ts: float, index: Index) -> FloatArray:
+    """1 from the time ``ts`` on, 0 before, at the samples ``index``."""
+    return np.asarray((t_s[index] >= ts).astype(float))
+
+
+def _scaled_by_step(b_nt: FloatArray, t_s: FloatArray, ts: float, index: Index) -> FloatArray:
+    """The step times ``b / FIELD_SCALE_NT`` at the samples ``index``, (m, 3)."""
+    h = _step_at(t_s, ts, index)
+    return np.asarray(h[:, None] * (b_nt[index] / FIELD_SCALE_NT))
 
 
 #: Magnetic-latitude centres [deg] and width [deg] of the field-aligned-current basis bumps.
@@ -750,7 +748,8 @@ def _design_fac(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
                 names.append(f"east_{hemi}{c:.0f}{suffix}_nt")
     if not bumps:
         return None
-    return DesignBlock(partial(_fac_columns, data, tuple(bumps)), names)
+    fn = partial(_fac_columns, data, tuple(bumps))
+    return DesignBlock(FunctionColumns(data.n, len(bumps), fn), names)
 
 
 def _fac_bump(mlat_deg: FloatArray, sign: float, centre_deg: float) -> FloatArray:
@@ -762,17 +761,21 @@ def _fac_bump(mlat_deg: FloatArray, sign: float, centre_deg: float) -> FloatArra
     return bump
 
 
-def _fac_columns(data: DiagnosisData, bumps: tuple[tuple[float, float, str], ...]) -> FloatArray:
-    """The field-aligned-current regressors, (N, 3, len(bumps)): built when a fit asks for them
-    (two dozen columns held for the whole attribution took 95 MB at 86,400 samples)."""
-    east = data.transverse_body[:, 0, :]
+def _fac_columns(
+    data: DiagnosisData, bumps: tuple[tuple[float, float, str], ...], index: Index
+) -> FloatArray:
+    """The field-aligned-current regressors of the samples ``index``, (m, 3, len(bumps)): built
+    when a fit asks for them (two dozen columns held for the whole attribution took 95 MB at
+    86,400 samples)."""
+    east = data.transverse_body[index, 0, :]
     phi = data.mlt_angle_rad
-    mods = {} if phi is None else {"_sin_mlt": np.sin(phi), "_cos_mlt": np.cos(phi)}
-    g = np.empty((data.n, 3, len(bumps)))
+    mlat = data.mlat_deg[index]
+    mods = {} if phi is None else {"_sin_mlt": np.sin(phi[index]), "_cos_mlt": np.cos(phi[index])}
+    g = np.empty((mlat.shape[0], 3, len(bumps)))
     bump_of: dict[tuple[float, float], FloatArray] = {}
     for k, (sign, c, suffix) in enumerate(bumps):
         if (sign, c) not in bump_of:
-            bump_of[(sign, c)] = _fac_bump(data.mlat_deg, sign, c)
+            bump_of[(sign, c)] = _fac_bump(mlat, sign, c)
         w = bump_of[(sign, c)]
         if suffix in mods:
             w = w * mods[suffix]
@@ -788,9 +791,10 @@ ATTITUDE_MAX_TERMS = 3
 SCAN_BLOCK_SAMPLES = 4096
 
 
-def _rotation_columns(data: DiagnosisData) -> FloatArray:
-    """e_k x B (k = x, y, z): field change of a small rotation about body axis k, (N, 3, 3)."""
-    b = data.b_ref_body_nt
+def _rotation_columns(data: DiagnosisData, index: Index | None = None) -> FloatArray:
+    """e_k x B (k = x, y, z): field change of a small rotation about body axis k, (N, 3, 3)
+    (of the samples ``index`` only, if given)."""
+    b = data.b_ref_body_nt if index is None else data.b_ref_body_nt[index]
     return np.stack([np.cross(np.eye(3)[k], b) for k in range(3)], axis=2)
 
 
@@ -937,19 +941,22 @@ def _design_attitude(data: DiagnosisData, train: BoolArray) -> DesignBlock | Non
         for fname in ("cos", "sin")
         for axis in "xyz"
     ]
+    fn = partial(_attitude_columns, data, float(data.t_utc_s[train][0]), tuple(chosen))
     return DesignBlock(
-        partial(_attitude_columns, data, float(data.t_utc_s[train][0]), tuple(chosen)),
+        FunctionColumns(data.n, len(names), fn),
         names,
         variant="periods_s=" + ",".join(f"{p:.0f}" for p in chosen),
     )
 
 
-def _attitude_columns(data: DiagnosisData, t0_s: float, periods_s: tuple[float, ...]) -> FloatArray:
-    """The attitude-error regressors of the periods kept, (N, 3, 6 x periods): built when a fit
-    asks for them instead of held for the whole attribution (memory grows with N)."""
-    t = data.t_utc_s - t0_s
-    rot = _rotation_columns(data) * 1e-3  # per mrad
-    g = np.empty((data.n, 3, 6 * len(periods_s)))
+def _attitude_columns(
+    data: DiagnosisData, t0_s: float, periods_s: tuple[float, ...], index: Index
+) -> FloatArray:
+    """The attitude-error regressors of the periods kept at the samples ``index``, (m, 3,
+    6 x periods): built when a fit asks for them instead of held for the whole attribution."""
+    t = data.t_utc_s[index] - t0_s
+    rot = _rotation_columns(data, index) * 1e-3  # per mrad
+    g = np.empty((t.shape[0], 3, 6 * len(periods_s)))
     col = 0
     for period in periods_s:
         w = 2 * np.pi / period

@@ -233,10 +233,21 @@ def _sh_normal_equations(
 
 
 def _sh_fit(
-    gram: FloatArray, rhs: FloatArray, degree: int, damping: float, weights: FloatArray
+    gram: FloatArray,
+    rhs: FloatArray,
+    degree: int,
+    damping: float,
+    weights: FloatArray,
+    left_out: tuple[FloatArray, FloatArray] | None = None,
 ) -> FloatArray:
+    """Damped coefficients to ``degree`` from the normal equations (less a left-out fold's)."""
     k = degree * (degree + 2)
-    lhs = gram[:k, :k] + np.diag(damping * weights[:k])
+    if left_out is None:
+        lhs = gram[:k, :k].copy()
+    else:  # only the block of the degree asked for, not the whole difference
+        lhs = gram[:k, :k] - left_out[0][:k, :k]
+        rhs = rhs[:k] - left_out[1][:k]
+    lhs += np.diag(damping * weights[:k])
     lhs[np.diag_indices(k)] += 1e-10 * float(np.trace(lhs)) / k + 1e-300
     return np.asarray(
         linalg.cho_solve(linalg.cho_factor(lhs, check_finite=False), rhs[:k], check_finite=False)
@@ -291,7 +302,7 @@ def _sh_stage(
         """Mean square per component over the left-out folds."""
         sse = 0.0
         for g_f, h_f, yy_f in parts:
-            c = _sh_fit(g_all - g_f, h_all - h_f, degree, beta * ms, weights)
+            c = _sh_fit(g_all, h_all, degree, beta * ms, weights, left_out=(g_f, h_f))
             k = c.shape[0]
             sse += yy_f - 2.0 * float(c @ h_f[:k]) + float(c @ g_f[:k, :k] @ c)
         return sse / n_rows
