@@ -68,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
     from orbitcal.diagnose.api import diagnose_parts, diagnosis_data
     from orbitcal.diagnose.report import report_html
     from orbitcal.field import get_field
-    from orbitcal.memory import release_freed_arrays
+    from orbitcal.memory import release_freed_arrays, trim_heap
 
     release_freed_arrays()
     get_field(args.field)  # unknown names fail before any reading
@@ -88,6 +88,7 @@ def run(args: argparse.Namespace) -> int:
             sigma_a=args.prior_sigma_matrix,
             sigma_o_nt=args.prior_sigma_offset,
         )
+    trim_heap()
     with one_blas_thread():
         data = diagnosis_data(
             tel,
@@ -96,6 +97,8 @@ def run(args: argparse.Namespace) -> int:
             attitude_frame=args.attitude_frame,
             calibration_prior=prior,
         )
+        del tel, orbit  # the diagnosis holds what it needs of them
+        trim_heap()
         report, att = diagnose_parts(data, rng=np.random.default_rng(args.seed))
         Path(args.out).write_text(json.dumps(report, indent=1) + "\n")
         if args.html:

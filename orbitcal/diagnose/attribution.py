@@ -42,6 +42,7 @@ import numpy.typing as npt
 from orbitcal.arrays import BoolArray, FloatArray, IntArray
 from orbitcal.diagnose.blocked import BlockedDesign
 from orbitcal.diagnose.bounds import consistency_reasons, param_range
+from orbitcal.diagnose.columns import chunk_slices, triangular_factor
 from orbitcal.diagnose.effects import (
     CATALOGUE,
     FIELD_SCALE_NT,
@@ -532,24 +533,39 @@ def _verdict_confidence(
     return agree / N_BOOTSTRAP
 
 
-def _calibration_basis(data: DiagnosisData, train: BoolArray) -> FloatArray:
-    """Orthonormal basis of the 12 calibration columns on the training rows, (3 n_train, 12)."""
-    b = data.b_ref_body_nt[train] / FIELD_SCALE_NT
-    x = np.zeros((b.shape[0], 3, 12))
-    for i in range(3):
-        x[:, i, 3 * i : 3 * i + 3] = b
-        x[:, i, 9 + i] = 1.0
-    q, _ = np.linalg.qr(x.reshape(-1, 12))
-    return np.asarray(q)
+@dataclass(frozen=True)
+class _CalibrationBasis:
+    """The 12 calibration columns ``X`` on the training rows with ``R^-1`` of ``X = Q R``:
+    ``Q^T f = R^-T X^T f`` without forming ``Q`` (3 n_train x 12)."""
+
+    b_scaled: FloatArray  # b_ref / FIELD_SCALE_NT on the training samples, (n_train, 3)
+    r_inv: FloatArray  # (12, 12)
+
+    def project(self, f: FloatArray) -> FloatArray:
+        """``Q^T f`` of a field on the training samples, ``f`` (n_train, 3) -> (12,)."""
+        xtf = np.concatenate([(self.b_scaled.T @ f).T.reshape(-1), f.sum(axis=0)])
+        return np.asarray(self.r_inv.T @ xtf)
 
 
-def _absorbed_fraction(fit: JointFit, k: int, train: BoolArray, basis: FloatArray) -> float | None:
+def _calibration_basis(data: DiagnosisData, train: BoolArray) -> _CalibrationBasis:
+    """The calibration's orthonormal basis on the training rows, in factored form."""
+    idx = np.flatnonzero(train)
+    r = np.zeros((0, 12))
+    for part in chunk_slices(idx.size):
+        r = triangular_factor(np.vstack([r, data.calibration_rows(idx[part])]))
+    r_inv = np.asarray(np.linalg.inv(r), dtype=np.float64)
+    return _CalibrationBasis(data.b_ref_body_nt[idx] / FIELD_SCALE_NT, r_inv)
+
+
+def _absorbed_fraction(
+    fit: JointFit, k: int, train: BoolArray, basis: _CalibrationBasis
+) -> float | None:
     """Share of block ``k``'s fitted field (training energy) inside the calibration's span."""
-    f = fit.effect_nt(k)[train].reshape(-1)
-    total = float(f @ f)
+    f = fit.effect_nt(k)[train]
+    total = float(np.sum(f * f))
     if total <= 0.0:
         return None
-    proj = basis.T @ f
+    proj = basis.project(f)
     return float(proj @ proj) / total
 
 

@@ -45,7 +45,8 @@ def _effect_scales(data: DiagnosisData, block: DesignBlock) -> FloatArray:
     Effect columns are scaled by the part the calibration cannot absorb, so the ridge acts on
     what the data can tell apart (a time offset under a steady spin is mostly absorbed): the root
     mean square of each column after projection on the 12 calibration columns (their orthonormal
-    basis, factorised once per data set). A column the calibration absorbs whole (the radial
+    basis ``X R^-1``, ``R^-1`` computed once per data set). A column the calibration absorbs
+    whole (the radial
     gradient of a pure dipole is -3B/r) keeps a floor of 1e-6 of its plain root mean square, so
     that the normal equations stay invertible. A column's scale depends on that column only, so
     it is kept with the block (a frozen dataclass: stored beside its fields) for every fit.
@@ -57,18 +58,21 @@ def _effect_scales(data: DiagnosisData, block: DesignBlock) -> FloatArray:
         return hit[1]
     n_rows = 3 * data.n
     q = block.width
-    q_cal = data.calibration_q
+    r_inv = data.calibration_r_inv
     step = FIT_BLOCK_SAMPLES
     sum_sq = np.zeros(q)
     q_eff = np.zeros((12, q))
     for a in range(0, data.n, step):
-        eff = block.rows(slice(a, a + step)).reshape(-1, q)
+        part = slice(a, a + step)
+        eff = block.rows(part).reshape(-1, q)
         sum_sq += np.sum(eff**2, axis=0)
-        q_eff += q_cal[3 * a : 3 * a + eff.shape[0]].T @ eff
+        q_eff += (data.calibration_rows(part) @ r_inv).T @ eff
     rest_sq = np.zeros(q)
     for a in range(0, data.n, step):
-        eff = block.rows(slice(a, a + step)).reshape(-1, q)
-        rest_sq += np.sum((eff - q_cal[3 * a : 3 * a + eff.shape[0]] @ q_eff) ** 2, axis=0)
+        part = slice(a, a + step)
+        eff = block.rows(part).reshape(-1, q)
+        q_rows = data.calibration_rows(part) @ r_inv
+        rest_sq += np.sum((eff - q_rows @ q_eff) ** 2, axis=0)
     raw = np.sqrt(sum_sq / n_rows)
     scale = np.maximum(np.sqrt(rest_sq / n_rows), 1e-6 * raw)
     cache[id(data)] = (weakref.ref(data), scale)

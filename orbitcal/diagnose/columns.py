@@ -30,6 +30,7 @@ __all__ = [
     "PerAxisColumns",
     "ScaledVectorColumns",
     "chunk_slices",
+    "triangular_factor",
 ]
 
 #: Samples asked for: a slice or sample indices.
@@ -54,6 +55,12 @@ class Columns(Protocol):
 def chunk_slices(n: int, step: int = CHUNK_SAMPLES) -> list[slice]:
     """Consecutive slices of at most ``step`` samples covering ``0 .. n``."""
     return [slice(a, min(a + step, n)) for a in range(0, n, step)]
+
+
+def triangular_factor(x: FloatArray) -> FloatArray:
+    """The triangular factor ``R`` of ``x = Q R`` (``Q`` not formed). Stacked on the next rows
+    and factorised again, it updates block by block to the factor of all rows."""
+    return np.asarray(np.linalg.qr(x, mode="r"))  # type: ignore[call-overload]
 
 
 def _take(factor: Factor, index: Index) -> FloatArray:

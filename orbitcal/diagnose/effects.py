@@ -39,6 +39,7 @@ from orbitcal.diagnose.columns import (
     PerAxisColumns,
     ScaledVectorColumns,
     chunk_slices,
+    triangular_factor,
 )
 from orbitcal.diagnose.prior import CalibrationPrior
 from orbitcal.diagnose.track import along_track
@@ -184,18 +185,26 @@ class DiagnosisData:
         if np.any(np.diff(self.t_utc_s) <= 0):
             raise ValueError("t_utc_s must be strictly increasing")
 
-    @cached_property
-    def calibration_q(self) -> FloatArray:
-        """Orthonormal basis (3N, 12) of the 12 calibration columns (``b_ref / FIELD_SCALE_NT``
-        per axis and an offset), rows sample-major: factorised once per data set instead of once
-        per joint fit (the same QR ran 38 times at 86,400 samples)."""
-        x = np.zeros((self.n, 3, 12))
-        b = self.b_ref_body_nt / FIELD_SCALE_NT
+    def calibration_rows(self, index: Index) -> FloatArray:
+        """The 12 calibration columns (``b_ref / FIELD_SCALE_NT`` per axis and an offset) of the
+        samples ``index``, rows sample-major, shape (3 m, 12)."""
+        b = self.b_ref_body_nt[index] / FIELD_SCALE_NT
+        x = np.zeros((b.shape[0], 3, 12))
         for i in range(3):
             x[:, i, 3 * i : 3 * i + 3] = b
             x[:, i, 9 + i] = 1.0
-        q, _ = np.linalg.qr(x.reshape(3 * self.n, 12))
-        return np.asarray(q)
+        return x.reshape(-1, 12)
+
+    @cached_property
+    def calibration_r_inv(self) -> FloatArray:
+        """Inverse ``R^-1`` (12, 12) of the triangular factor of the 12 calibration columns
+        ``X = Q R``: an orthonormal basis of the calibration is ``X R^-1``, built a block of
+        samples at a time (the whole 3N x 12 ``Q``, 288 B per sample, is never held). ``R`` is
+        updated block by block (a QR of the previous factor stacked on the new rows)."""
+        r = np.zeros((0, 12))
+        for part in chunk_slices(self.n):
+            r = triangular_factor(np.vstack([r, self.calibration_rows(part)]))
+        return np.asarray(np.linalg.inv(r))
 
     @property
     def n(self) -> int:
@@ -808,48 +817,153 @@ def _design_attitude(data: DiagnosisData, train: BoolArray) -> DesignBlock | Non
     periods = ATTITUDE_PERIODS_S[0.8 * span > ATTITUDE_PERIODS_S]
     if periods.size == 0:
         return None
-    rot = _rotation_columns(data) * 1e-3  # per mrad
-    tt = t[train]
-    rt = rot[train]
-    n_tr = int(train.sum())
-    # Scan jointly with the calibration: project the 12 calibration columns out first.
-    x_cal = np.zeros((n_tr, 3, 12))
-    b_tr = data.b_ref_body_nt[train] / FIELD_SCALE_NT
-    for i in range(3):
-        x_cal[:, i, 3 * i : 3 * i + 3] = b_tr
-        x_cal[:, i, 9 + i] = 1.0
-    q_fixed, _ = np.linalg.qr(x_cal.reshape(-1, 12))
-    y = data.b_raw_nt[train].reshape(-1)
+    scan = _AttitudeScan(data, train)
     chosen: list[float] = []
     # The scan needs, per period, only 6 x 6 and 6 x q sums over the samples: the gain of the
     # projected columns P[R c, R s] (P = I - QQ^T, R = rotation columns, c, s = cos, sin) is
     # g^T (G + eps tr(G) I)^-1 g with G = A - B^T B, A = [[sum c^2 M, sum cs M], [., sum s^2 M]],
     # M = R^T R, B = [sum c K, sum s K], K = Q^T R per sample, g = [sum c R^T r, sum s R^T r].
-    # All periods of a grid are summed at once, a block of samples at a time; the dense 3N x 6
-    # columns are built only for the periods kept.
-    m_rr = np.matmul(np.swapaxes(rt, 1, 2), rt).reshape(n_tr, 9)
+    # All periods of a grid are summed at once, a block of samples at a time. Q (the calibration
+    # columns and the sinusoids of the periods kept) is never held whole: it is X R^-1, the
+    # columns X built per block and R from a block-updated QR (:class:`_AttitudeScan`).
 
-    def per_sample_k(q3: FloatArray, a0: int, a1: int) -> FloatArray:
-        """K = Q^T R per sample of the block a0:a1, (a1 - a0, 3 q)."""
-        k = q3[a0:a1, 0, :, None] * rt[a0:a1, 0, None, :]
-        for i in (1, 2):
-            k += q3[a0:a1, i, :, None] * rt[a0:a1, i, None, :]
-        return k.reshape(a1 - a0, -1)
+    def first_best(periods_s: FloatArray, g: FloatArray, floor: float) -> tuple[float, float]:
+        # the first period whose gain is the largest, if it beats ``floor`` (a sequential scan
+        # keeping strictly better gains picks the same one)
+        if g.size == 0:
+            return floor, 0.0
+        i = int(np.argmax(g))
+        if not g[i] > floor:
+            return floor, 0.0
+        return float(g[i]), float(periods_s[i])
 
-    def gains(periods_s: FloatArray, r_now: FloatArray, q: FloatArray) -> FloatArray:
-        q3 = q.reshape(n_tr, 3, -1)
-        n_q = q3.shape[2]
-        v = np.matmul(r_now.reshape(n_tr, 1, 3), rt)[:, 0, :]
+    for _ in range(ATTITUDE_MAX_TERMS):
+        basis = scan.basis(chosen)
+        r_now = scan.residual(basis)
+        free = np.array(
+            [not any(abs(float(p) / c - 1.0) < 0.05 for c in chosen) for p in periods], bool
+        )
+        best_gain, best_period = first_best(
+            periods[free], scan.gains(periods[free], r_now, basis), 0.0
+        )
+        if best_gain <= 0.0:
+            break
+        # Refine the period on a fine grid (+-2.5 %): phase errors grow over the held-out span.
+        fine = best_period * np.linspace(0.975, 1.025, 51)
+        g_fine, p_fine = first_best(fine, scan.gains(fine, r_now, basis), best_gain)
+        if p_fine:
+            best_gain, best_period = g_fine, p_fine
+        chosen.append(best_period)
+    if not chosen:
+        return None
+    # Cyclic refinement: re-fit each period with the others fixed (close periods that one
+    # training span cannot resolve at once are separated this way).
+    for _ in range(2):
+        for j in range(len(chosen)):
+            basis = scan.basis(chosen[:j] + chosen[j + 1 :])
+            r_now = scan.residual(basis)
+            grid = chosen[j] * np.linspace(0.94, 1.06, 61)
+            _, p_best = first_best(grid, scan.gains(grid, r_now, basis), -1.0)
+            chosen[j] = p_best if p_best else chosen[j]
+    names = [
+        f"dtheta_{axis}_{fname}_{period:.0f}s_mrad"
+        for period in chosen
+        for fname in ("cos", "sin")
+        for axis in "xyz"
+    ]
+    fn = partial(_attitude_columns, data, float(data.t_utc_s[train][0]), tuple(chosen))
+    return DesignBlock(
+        FunctionColumns(data.n, len(names), fn),
+        names,
+        variant="periods_s=" + ",".join(f"{p:.0f}" for p in chosen),
+    )
+
+
+class _AttitudeScan:
+    """The training samples of the attitude period scan, read a block at a time.
+
+    A *basis* is the periods kept with ``R^-1`` of the columns ``X`` = (12 calibration columns,
+    then cos and sin of each period times the rotation columns): ``Q = X R^-1`` is orthonormal and
+    spans what the scan projects out; its rows are built per block of samples.
+    """
+
+    def __init__(self, data: DiagnosisData, train: BoolArray) -> None:
+        self.data = data
+        self.idx = np.flatnonzero(train)
+        self.t = data.t_utc_s[self.idx] - float(data.t_utc_s[self.idx[0]])
+        self.y = data.b_raw_nt[self.idx].reshape(-1)
+        self.n = int(self.idx.size)
+
+    def blocks(self) -> list[tuple[int, int]]:
+        return [
+            (a, min(a + SCAN_BLOCK_SAMPLES, self.n)) for a in range(0, self.n, SCAN_BLOCK_SAMPLES)
+        ]
+
+    def rot(self, a0: int, a1: int) -> FloatArray:
+        """Rotation columns per mrad of the block, (m, 3, 3)."""
+        return _rotation_columns(self.data, self.idx[a0:a1]) * 1e-3
+
+    def columns(self, periods: Sequence[float], a0: int, a1: int) -> FloatArray:
+        """The columns X of the block, (3 m, 12 + 6 len(periods))."""
+        parts = [self.data.calibration_rows(self.idx[a0:a1])]
+        if periods:
+            rt, tt = self.rot(a0, a1), self.t[a0:a1]
+            for period in periods:
+                w = 2 * np.pi / period
+                cols = np.concatenate(
+                    [rt * np.cos(w * tt)[:, None, None], rt * np.sin(w * tt)[:, None, None]],
+                    axis=2,
+                )
+                parts.append(cols.reshape(-1, 6))
+        return np.concatenate(parts, axis=1)
+
+    def basis(self, periods: Sequence[float]) -> tuple[tuple[float, ...], FloatArray]:
+        """The periods and ``R^-1`` of their columns (block-updated QR)."""
+        width = 12 + 6 * len(periods)
+        r = np.zeros((0, width))
+        for a0, a1 in self.blocks():
+            r = triangular_factor(np.vstack([r, self.columns(periods, a0, a1)]))
+        return tuple(periods), np.asarray(np.linalg.inv(r))
+
+    def q_rows(self, basis: tuple[tuple[float, ...], FloatArray], a0: int, a1: int) -> FloatArray:
+        return np.asarray(self.columns(basis[0], a0, a1) @ basis[1])
+
+    def residual(self, basis: tuple[tuple[float, ...], FloatArray]) -> FloatArray:
+        """``y - Q Q^T y`` over the training rows, (3 n,)."""
+        qty = np.zeros(basis[1].shape[1])
+        for a0, a1 in self.blocks():
+            qty += self.q_rows(basis, a0, a1).T @ self.y[3 * a0 : 3 * a1]
+        out = np.empty_like(self.y)
+        for a0, a1 in self.blocks():
+            rows = slice(3 * a0, 3 * a1)
+            out[rows] = self.y[rows] - self.q_rows(basis, a0, a1) @ qty
+        return out
+
+    def gains(
+        self,
+        periods_s: FloatArray,
+        r_now: FloatArray,
+        basis: tuple[tuple[float, ...], FloatArray],
+    ) -> FloatArray:
+        """Gain in fit of the 6 columns of each period, projected off the basis."""
+        n_q = basis[1].shape[1]
         w = 2 * np.pi / np.asarray(periods_s, dtype=np.float64)
         p_n = w.size
         acc_m = np.zeros((3, p_n, 9))
         acc_k = np.zeros((2, p_n, 3 * n_q))
         acc_v = np.zeros((2, p_n, 3))
-        for a0 in range(0, n_tr, SCAN_BLOCK_SAMPLES):
-            a1 = min(a0 + SCAN_BLOCK_SAMPLES, n_tr)
-            phase = np.outer(w, tt[a0:a1])
+        for a0, a1 in self.blocks():
+            m = a1 - a0
+            rt = self.rot(a0, a1)
+            q3 = self.q_rows(basis, a0, a1).reshape(m, 3, n_q)
+            m_blk = np.matmul(np.swapaxes(rt, 1, 2), rt).reshape(m, 9)
+            k_blk = q3[:, 0, :, None] * rt[:, 0, None, :]  # K = Q^T R per sample
+            for i in (1, 2):
+                k_blk += q3[:, i, :, None] * rt[:, i, None, :]
+            k_blk = k_blk.reshape(m, -1)
+            v_blk = np.matmul(r_now[3 * a0 : 3 * a1].reshape(m, 1, 3), rt)[:, 0, :]
+            phase = np.outer(w, self.t[a0:a1])
             c, s_ = np.cos(phase), np.sin(phase)
-            m_blk, k_blk, v_blk = m_rr[a0:a1], per_sample_k(q3, a0, a1), v[a0:a1]
             acc_m[0] += (c * c) @ m_blk
             acc_m[1] += (c * s_) @ m_blk
             acc_m[2] += (s_ * s_) @ m_blk
@@ -878,75 +992,6 @@ def _design_attitude(data: DiagnosisData, train: BoolArray) -> DesignBlock | Non
                 with contextlib.suppress(np.linalg.LinAlgError):
                     out[i] = float(rhs[i] @ np.linalg.solve(reg[i], rhs[i]))
         return np.asarray(out)
-
-    def first_best(periods_s: FloatArray, g: FloatArray, floor: float) -> tuple[float, float]:
-        # the first period whose gain is the largest, if it beats ``floor`` (a sequential scan
-        # keeping strictly better gains picks the same one)
-        if g.size == 0:
-            return floor, 0.0
-        i = int(np.argmax(g))
-        if not g[i] > floor:
-            return floor, 0.0
-        return float(g[i]), float(periods_s[i])
-
-    def cols_of(period: float, q: FloatArray) -> FloatArray:
-        w = 2 * np.pi / period
-        cols = np.concatenate(
-            [rt * np.cos(w * tt)[:, None, None], rt * np.sin(w * tt)[:, None, None]], axis=2
-        ).reshape(-1, 6)
-        return np.asarray(cols - q @ (q.T @ cols))
-
-    for _ in range(ATTITUDE_MAX_TERMS):
-        r_now = y - q_fixed @ (q_fixed.T @ y)
-        free = np.array(
-            [not any(abs(float(p) / c - 1.0) < 0.05 for c in chosen) for p in periods], bool
-        )
-        best_gain, best_period = first_best(
-            periods[free], gains(periods[free], r_now, q_fixed), 0.0
-        )
-        if best_gain <= 0.0:
-            break
-        # Refine the period on a fine grid (+-2.5 %): phase errors grow over the held-out span.
-        fine = best_period * np.linspace(0.975, 1.025, 51)
-        g_fine, p_fine = first_best(fine, gains(fine, r_now, q_fixed), best_gain)
-        if p_fine:
-            best_gain, best_period = g_fine, p_fine
-        chosen.append(best_period)
-        q_new, _ = np.linalg.qr(cols_of(best_period, q_fixed))
-        q_fixed = np.concatenate([q_fixed, q_new], axis=1)
-    if not chosen:
-        return None
-    # Cyclic refinement: re-fit each period with the others fixed (close periods that one
-    # training span cannot resolve at once are separated this way).
-    q_cal = q_fixed[:, :12]
-
-    def basis(periods_s: list[float]) -> FloatArray:
-        q = q_cal
-        for p in periods_s:
-            qn, _ = np.linalg.qr(cols_of(p, q))
-            q = np.concatenate([q, qn], axis=1)
-        return q
-
-    for _ in range(2):
-        for j in range(len(chosen)):
-            others = chosen[:j] + chosen[j + 1 :]
-            q_o = basis(others)
-            r_now = y - q_o @ (q_o.T @ y)
-            grid = chosen[j] * np.linspace(0.94, 1.06, 61)
-            _, p_best = first_best(grid, gains(grid, r_now, q_o), -1.0)
-            chosen[j] = p_best if p_best else chosen[j]
-    names = [
-        f"dtheta_{axis}_{fname}_{period:.0f}s_mrad"
-        for period in chosen
-        for fname in ("cos", "sin")
-        for axis in "xyz"
-    ]
-    fn = partial(_attitude_columns, data, float(data.t_utc_s[train][0]), tuple(chosen))
-    return DesignBlock(
-        FunctionColumns(data.n, len(names), fn),
-        names,
-        variant="periods_s=" + ",".join(f"{p:.0f}" for p in chosen),
-    )
 
 
 def _attitude_columns(
