@@ -1630,13 +1630,25 @@ def _regional_fac(
     # to FAC_CV_FOLDS folds; the bumps fitted on the other folds predict each fold.
     chunk = ((data.t_utc_s[idx] - data.t_utc_s[idx[0]]) // FAC_CV_CHUNK_S).astype(int)
     fold = chunk % FAC_CV_FOLDS
+    # Each fold's normal equations once; a fit on the other folds is the total less its own
+    # (least squares on the small system: a bump the other folds hardly reach stays bounded).
+    width = g_hi.shape[2]
+    r_hi = r_now[idx]
+    grams = np.zeros((FAC_CV_FOLDS, width, width))
+    rhss = np.zeros((FAC_CV_FOLDS, width))
+    for f in range(FAC_CV_FOLDS):
+        rows = fold == f
+        g = g_hi[rows].reshape(-1, width)
+        grams[f] = g.T @ g
+        rhss[f] = g.T @ r_hi[rows].reshape(-1)
     pred = np.zeros((idx.size, 3))
     for f in range(FAC_CV_FOLDS):
-        fit_rows, test_rows = fold != f, fold == f
+        test_rows = fold == f
         if not np.any(test_rows):
             continue
-        g = g_hi[fit_rows].reshape(-1, g_hi.shape[2])
-        coef = np.linalg.lstsq(g, r_now[idx[fit_rows]].reshape(-1), rcond=None)[0]
+        gram = grams.sum(axis=0) - grams[f]
+        rhs = rhss.sum(axis=0) - rhss[f]
+        coef = np.linalg.lstsq(gram, rhs, rcond=None)[0]
         pred[test_rows] = g_hi[test_rows] @ coef
     rms_after = norm_rms_nt(r_now[hi] - pred)
     significant = bool(

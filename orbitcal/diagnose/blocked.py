@@ -46,10 +46,10 @@ def _effect_scales(data: DiagnosisData, block: DesignBlock) -> FloatArray:
     what the data can tell apart (a time offset under a steady spin is mostly absorbed): the root
     mean square of each column after projection on the 12 calibration columns (their orthonormal
     basis ``X R^-1``, ``R^-1`` computed once per data set). A column the calibration absorbs
-    whole (the radial
-    gradient of a pure dipole is -3B/r) keeps a floor of 1e-6 of its plain root mean square, so
-    that the normal equations stay invertible. A column's scale depends on that column only, so
-    it is kept with the block (a frozen dataclass: stored beside its fields) for every fit.
+    whole (the radial gradient of a pure dipole is -3B/r) keeps a floor of 1e-6 of its plain
+    root mean square, so that the normal equations stay invertible. A column's scale depends on
+    that column only, so it is kept with the block (a frozen dataclass: stored beside its fields)
+    for every fit.
     """
     cache: dict[int, tuple[weakref.ref[DiagnosisData], FloatArray]]
     cache = block.__dict__.setdefault("_scale_cache", {})
@@ -58,21 +58,17 @@ def _effect_scales(data: DiagnosisData, block: DesignBlock) -> FloatArray:
         return hit[1]
     n_rows = 3 * data.n
     q = block.width
-    r_inv = data.calibration_r_inv
-    step = FIT_BLOCK_SAMPLES
+    # One pass: the part a column keeps outside the calibration's span has the square norm
+    # |e|^2 - |Q^T e|^2 (Q orthonormal), with Q^T e = R^-T X^T e.
     sum_sq = np.zeros(q)
-    q_eff = np.zeros((12, q))
-    for a in range(0, data.n, step):
-        part = slice(a, a + step)
+    x_t_eff = np.zeros((12, q))
+    for a in range(0, data.n, FIT_BLOCK_SAMPLES):
+        part = slice(a, a + FIT_BLOCK_SAMPLES)
         eff = block.rows(part).reshape(-1, q)
         sum_sq += np.sum(eff**2, axis=0)
-        q_eff += (data.calibration_rows(part) @ r_inv).T @ eff
-    rest_sq = np.zeros(q)
-    for a in range(0, data.n, step):
-        part = slice(a, a + step)
-        eff = block.rows(part).reshape(-1, q)
-        q_rows = data.calibration_rows(part) @ r_inv
-        rest_sq += np.sum((eff - q_rows @ q_eff) ** 2, axis=0)
+        x_t_eff += data.calibration_rows(part).T @ eff
+    q_eff = data.calibration_r_inv.T @ x_t_eff
+    rest_sq = np.clip(sum_sq - np.sum(q_eff**2, axis=0), 0.0, None)
     raw = np.sqrt(sum_sq / n_rows)
     scale = np.maximum(np.sqrt(rest_sq / n_rows), 1e-6 * raw)
     cache[id(data)] = (weakref.ref(data), scale)

@@ -780,16 +780,20 @@ def _fac_columns(
     phi = data.mlt_angle_rad
     mlat = data.mlat_deg[index]
     mods = {} if phi is None else {"_sin_mlt": np.sin(phi[index]), "_cos_mlt": np.cos(phi[index])}
-    g = np.empty((mlat.shape[0], 3, len(bumps)))
-    bump_of: dict[tuple[float, float], FloatArray] = {}
-    for k, (sign, c, suffix) in enumerate(bumps):
-        if (sign, c) not in bump_of:
-            bump_of[(sign, c)] = _fac_bump(mlat, sign, c)
-        w = bump_of[(sign, c)]
-        if suffix in mods:
-            w = w * mods[suffix]
-        np.multiply(east, w[:, None], out=g[:, :, k])
-    return g
+    weights = np.zeros((mlat.shape[0], len(bumps)))
+    for sign in (1.0, -1.0):
+        # every bump of a hemisphere at once, on the samples within reach of its bumps
+        centres = sorted({c for sg, c, _ in bumps if sg == sign})
+        x = sign * mlat
+        on = np.flatnonzero(x >= FAC_MIN_MLAT_DEG - 3 * FAC_WIDTH_DEG)
+        if not centres or on.size == 0:
+            continue
+        values = np.exp(-0.5 * ((x[on, None] - np.array(centres)) / FAC_WIDTH_DEG) ** 2)
+        for k, (sg, c, suffix) in enumerate(bumps):
+            if sg == sign:
+                w = values[:, centres.index(c)]
+                weights[on, k] = w * mods[suffix][on] if suffix in mods else w
+    return np.asarray(east[:, :, None] * weights[:, None, :])
 
 
 #: Periods scanned for the attitude-error sinusoids [s] (log-spaced), and how many are kept.
@@ -798,6 +802,11 @@ ATTITUDE_MAX_TERMS = 3
 
 #: Samples per block of the batched period scan (memory ~ periods x block x 8 B per array).
 SCAN_BLOCK_SAMPLES = 4096
+
+#: At most this many training samples enter the period scan (every k-th): the shortest period
+#: scanned (1,200 s) then still has hundreds of samples per cycle on a day at 1 Hz, and the scan
+#: costs the same beyond. The regressors of the periods found use every sample.
+SCAN_MAX_SAMPLES = 20_000
 
 
 def _rotation_columns(data: DiagnosisData, index: Index | None = None) -> FloatArray:
@@ -879,6 +888,34 @@ def _design_attitude(data: DiagnosisData, train: BoolArray) -> DesignBlock | Non
     )
 
 
+#: Samples per run of the factored sinusoids in :func:`_cos_sin`.
+_TRIG_RUN = 64
+
+
+def _cos_sin(w_rad_s: FloatArray, t_s: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """``cos(w t)`` and ``sin(w t)``, (periods, samples).
+
+    On evenly spaced samples ``t = t_j + k dt`` (runs of :data:`_TRIG_RUN`) the exponential
+    factors as ``exp(i w t_j) exp(i w k dt)``: one complex exponential per run and per offset
+    instead of two per sample, three times faster and equal to ~4e-15 (a product of two
+    rounded unit phasors); uneven times are evaluated directly.
+    """
+    m = t_s.shape[0]
+    runs = m // _TRIG_RUN
+    if runs >= 2 and m == runs * _TRIG_RUN:
+        dt = float(t_s[1] - t_s[0])
+        offsets = dt * np.arange(_TRIG_RUN)
+        starts = t_s[::_TRIG_RUN]
+        if dt > 0.0 and np.array_equal(t_s, (starts[:, None] + offsets[None, :]).reshape(-1)):
+            z = (
+                np.exp(1j * np.outer(w_rad_s, starts))[:, :, None]
+                * np.exp(1j * np.outer(w_rad_s, offsets))[:, None, :]
+            ).reshape(w_rad_s.shape[0], m)
+            return np.ascontiguousarray(z.real), np.ascontiguousarray(z.imag)
+    phase = np.outer(w_rad_s, t_s)
+    return np.cos(phase), np.sin(phase)
+
+
 class _AttitudeScan:
     """The training samples of the attitude period scan, read a block at a time.
 
@@ -889,7 +926,8 @@ class _AttitudeScan:
 
     def __init__(self, data: DiagnosisData, train: BoolArray) -> None:
         self.data = data
-        self.idx = np.flatnonzero(train)
+        idx = np.flatnonzero(train)
+        self.idx = idx[:: max(1, -(-idx.size // SCAN_MAX_SAMPLES))]
         self.t = data.t_utc_s[self.idx] - float(data.t_utc_s[self.idx[0]])
         self.y = data.b_raw_nt[self.idx].reshape(-1)
         self.n = int(self.idx.size)
@@ -962,8 +1000,7 @@ class _AttitudeScan:
                 k_blk += q3[:, i, :, None] * rt[:, i, None, :]
             k_blk = k_blk.reshape(m, -1)
             v_blk = np.matmul(r_now[3 * a0 : 3 * a1].reshape(m, 1, 3), rt)[:, 0, :]
-            phase = np.outer(w, self.t[a0:a1])
-            c, s_ = np.cos(phase), np.sin(phase)
+            c, s_ = _cos_sin(w, self.t[a0:a1])
             acc_m[0] += (c * c) @ m_blk
             acc_m[1] += (c * s_) @ m_blk
             acc_m[2] += (s_ * s_) @ m_blk
