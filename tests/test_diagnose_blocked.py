@@ -122,3 +122,38 @@ def test_robust_bounded_fit_does_not_depend_on_the_block_size(world, monkeypatch
         np.testing.assert_allclose(ca, cb, rtol=0.0, atol=1e-6 * float(np.sqrt(np.diag(cov)).min()))
     assert a.sigma_nt == pytest.approx(b.sigma_nt, rel=1e-9)
     np.testing.assert_allclose(a.cov_cal, b.cov_cal, rtol=1e-7, atol=1e-20)
+
+
+@pytest.mark.parametrize("with_prior", [False, True])
+def test_pair_screen_from_gram_matrices_equals_one_weighted_fit_per_pair(
+    world, with_prior: bool
+) -> None:
+    """The pair screen solves every pair from two Gram matrices; each value equals the held-out
+    RMS of that pair fitted on its own with the screen's fixed weights (fit_joint, one pass),
+    beside fixed effects, with the bounds, the crust's prior and a calibration prior."""
+    import dataclasses
+    from itertools import combinations
+
+    from orbitcal.diagnose.attribution import Selection
+    from orbitcal.diagnose.prior import CalibrationPrior
+
+    data, train, blocks = world
+    if with_prior:
+        prior = CalibrationPrior(a=np.eye(3), o_nt=np.zeros(3))
+        data = dataclasses.replace(data, calibration_prior=prior)
+    _, holdout, _ = time_blocks(data.t_utc_s)
+    names = ["temperature", "nonlinearity", "external_field", "sun_driven", "magnetorquer"]
+    designs = {}
+    for name in names:
+        bl = get_effect(name).design(data, train)
+        if bl is not None:
+            designs[name] = bl
+    assert len(designs) >= 3
+    sel = Selection(data, train, holdout, designs)
+    fixed = [blocks[0]]  # the crust selected before
+    base = fit_joint(data, train, fixed)
+    sel._screen_huber_weights(data.b_raw_nt - base.predict_nt(data))
+    pairs = list(combinations(designs.values(), 2))
+    screened = sel._screen_pairs(fixed, pairs)
+    each = [sel._screen_rms(fixed, [a, b]) for a, b in pairs]
+    np.testing.assert_allclose(screened, each, rtol=1e-9)

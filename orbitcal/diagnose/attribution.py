@@ -1062,7 +1062,7 @@ class Selection:
         # pass each instead of a reweighted fit); only pairs whose screened held-out RMS could
         # gain are fitted in full, best first, until the rest cannot beat the best that passed.
         self._screen_huber_weights(r_before)
-        rms_screen = [self._screen_rms(fixed, [a.block, b.block]) for a, b in pairs]
+        rms_screen = self._screen_pairs(fixed, [(a.block, b.block) for a, b in pairs])
         screened = sorted(
             ((rms, a, b) for rms, (a, b) in zip(rms_screen, pairs, strict=True)),
             key=lambda t: t[0],
@@ -1106,6 +1106,97 @@ class Selection:
         self._screen_train = mask
         held = np.flatnonzero(self.holdout)
         self._screen_holdout = held[:: max(1, -(-held.size // PAIR_SCREEN_SAMPLES))]
+
+    def _screen_pairs(
+        self, fixed: Sequence[DesignBlock], pairs: Sequence[tuple[DesignBlock, DesignBlock]]
+    ) -> list[float]:
+        """Held-out RMS of ``fixed`` plus each pair, each fitted once with the screen's fixed
+        weights, all from two Gram matrices.
+
+        One pass over the screen's training samples forms the weighted normal equations of the
+        calibration, ``fixed`` and every block of the pairs; one over its held-out samples the
+        unweighted ones. A pair's fit is then the solve of its rows and columns (with the ridge,
+        the bounds and the priors of :func:`fit_joint`), and its held-out residual sum of squares
+        ``y'y - 2 t'X'y + t'X'X t``: the cost of 55 pairs is that of one fit. The priors' noise
+        level is each pair's own, as :func:`fit_joint` takes it (one residual pass per pair that has
+        a prior).
+        """
+        assert self._screen_weights is not None and self._screen_train is not None
+        extra: list[DesignBlock] = []
+        for pair in pairs:
+            for bl in pair:
+                if not any(bl is e for e in extra):
+                    extra.append(bl)
+        design = BlockedDesign(self.data, [*fixed, *extra])
+        scale = design.scale
+        cols_of: dict[int, npt.NDArray[np.intp]] = {}
+        col = 12 + sum(bl.width for bl in fixed)
+        for bl in extra:
+            cols_of[id(bl)] = np.arange(col, col + bl.width)
+            col += bl.width
+        base_cols = np.arange(12 + sum(bl.width for bl in fixed))
+        index = np.flatnonzero(self._screen_train)
+        y = self.data.b_raw_nt[index].reshape(-1)
+        w = np.asarray(self._screen_weights[index], dtype=float).reshape(-1)
+        gram, rhs_data = design.normal_equations(index, y, w)
+        n_rows = y.size
+        p_all = design.p
+        ridge = np.r_[np.full(12, 1e-10), np.full(p_all - 12, 1e-5)] * n_rows
+        # Held-out sums about a reference fit (the model without the pair, plain weighted least
+        # squares): y'y - 2 t'X'y + t'X'X t of the raw field (~5e4 nT) against a residual of
+        # a few nT would lose eight digits to cancellation.
+        held = self._screen_holdout
+        theta_ref = np.zeros(p_all)
+        sub = np.ix_(base_cols, base_cols)
+        theta_ref[base_cols] = np.linalg.lstsq(
+            gram[sub] + np.diag(ridge[base_cols]), rhs_data[base_cols], rcond=1e-13
+        )[0]
+        y_h = self.data.b_raw_nt[held].reshape(-1)
+        r_h = design.residual(held, y_h, theta_ref)
+        gram_h, rhs_h = design.normal_equations(held, y_h, np.ones_like(y_h))
+        rhs_h = rhs_h - gram_h @ theta_ref
+        rr_h = float(r_h @ r_h)
+        pm, pp = _effect_priors(design.blocks, scale)
+        prior = self.data.calibration_prior
+        plain: tuple[FloatArray, FloatArray] | None = None
+        if prior is not None or np.any(pp > 0.0):
+            plain = design.normal_equations(index, y, np.ones_like(y))
+        lo_all, hi_all = _scaled_bounds(design.blocks, scale)
+        out = []
+        for a, b in pairs:
+            cols = np.concatenate([base_cols, cols_of[id(a)], cols_of[id(b)]])
+            sub = np.ix_(cols, cols)
+            prior_mean = np.zeros(cols.size)
+            prior_precision = np.zeros(cols.size)
+            if plain is not None and (prior is not None or np.any(pp[cols] > 0.0)):
+                # the priors' noise level as fit_joint takes it: the residual of the same model
+                # by plain least squares (one pass over the screen's samples)
+                theta0 = np.linalg.lstsq(plain[0][sub], plain[1][cols], rcond=1e-13)[0]
+                r0 = BlockedDesign(self.data, [*fixed, a, b]).residual(index, y, theta0)
+                noise = max(float(1.4826 * np.median(np.abs(r0 - np.median(r0)))), 1e-6)
+                if prior is not None:
+                    sd = np.r_[
+                        np.full(9, prior.sigma_a * FIELD_SCALE_NT), np.full(3, prior.sigma_o_nt)
+                    ]
+                    prior_precision[:12] = noise**2 / (sd * scale[:12]) ** 2
+                    prior_mean[:12] = np.r_[prior.a.ravel() * FIELD_SCALE_NT, prior.o_nt]
+                    prior_mean[:12] *= scale[:12]
+                prior_mean = np.where(pp[cols] > 0.0, pm[cols], prior_mean)
+                prior_precision = prior_precision + pp[cols] * noise**2
+            normal = gram[sub] + np.diag(ridge[cols] + prior_precision)
+            rhs = rhs_data[cols] + prior_precision * prior_mean
+            try:
+                theta = np.linalg.solve(normal, rhs)
+            except np.linalg.LinAlgError:  # pragma: no cover - singular design
+                theta = np.linalg.lstsq(normal, rhs, rcond=None)[0]
+            if lo_all is not None and hi_all is not None:
+                lo, hi = lo_all[cols], hi_all[cols]
+                if np.any(theta < lo) or np.any(theta > hi):
+                    theta = _box_solve(normal, rhs, lo, hi, theta)
+            d = theta - theta_ref[cols]
+            rss = rr_h - 2.0 * float(d @ rhs_h[cols]) + float(d @ gram_h[sub] @ d)
+            out.append(float(np.sqrt(max(rss, 0.0) / held.size)))
+        return out
 
     def _screen_rms(self, fixed: Sequence[DesignBlock], extra: Sequence[DesignBlock]) -> float:
         """Held-out RMS of ``fixed + extra`` fitted once with the screen's fixed weights."""

@@ -180,65 +180,60 @@ class BlockedDesign:
         c[:, 3] = 1.0
         return c
 
+    def _axis_index(self) -> list[IntArray]:
+        """Per sensor axis, the columns of ``X`` that are not zero on that axis's rows: its four
+        calibration columns, then each block's :meth:`DesignBlock.axis_columns`."""
+        cached = self.__dict__.get("_axis_index_cache")
+        if cached is not None:
+            return list(cached)
+        offsets = np.cumsum([12, *[bl.width for bl in self.blocks]]).tolist()
+        per_block = [bl.axis_columns() for bl in self.blocks]
+        out = [
+            np.concatenate(
+                [np.array(_CAL_COLUMNS[i])]
+                + [lo + cols[i] for lo, cols in zip(offsets, per_block, strict=False)]
+            ).astype(np.intp)
+            for i in range(3)
+        ]
+        self.__dict__["_axis_index_cache"] = out
+        return list(out)
+
+    def _axis_design(self, part: IntArray | slice) -> list[FloatArray]:
+        """Per sensor axis, that axis's rows of ``X`` (unscaled) without the columns that are
+        zero there, (m, len(_axis_index()[i])) each."""
+        c = self._cal_rows(part)
+        per_block = [bl.axis_rows(part) for bl in self.blocks]
+        if not per_block:
+            return [c, c, c]
+        return [np.concatenate([c, *(rows[i] for rows in per_block)], axis=1) for i in range(3)]
+
     def normal_equations(
         self, index: IntArray, y: FloatArray, w: FloatArray
     ) -> tuple[FloatArray, FloatArray]:
         """``X' W X`` (p, p) and ``X' W y`` (p,) over the rows of the samples ``index``.
 
-        ``y`` and ``w`` have one value per row, ``3 index.size``. The products are formed from
-        the structure of ``X`` and unscaled, then scaled once: per axis, the 4 x 4 calibration
-        block and its coupling to each effect block; each pair of effect blocks over all rows.
-        That is a third of the arithmetic of the dense rows at p = 24, and the dense rows (two
-        thirds zeros) are never assembled.
+        ``y`` and ``w`` have one value per row, ``3 index.size``. Formed per sensor axis from
+        that axis's rows without the columns that are zero on them (the other axes' calibration
+        columns, and two thirds of a block that acts on one axis per column), unscaled, then
+        added into place and scaled once. The dense rows are never assembled.
         """
-        widths = [bl.width for bl in self.blocks]
-        g_cc = np.zeros((3, 4, 4))
-        g_ce = [np.zeros((3, 4, q)) for q in widths]
-        g_ee = {
-            (j, k): np.zeros((widths[j], widths[k]))
-            for j in range(len(widths))
-            for k in range(j, len(widths))
-        }
-        r_c = np.zeros((3, 4))
-        r_e = [np.zeros(q) for q in widths]
+        axis_index = self._axis_index()
+        grams = [np.zeros((ix.size, ix.size)) for ix in axis_index]
+        rhss = [np.zeros(ix.size) for ix in axis_index]
         for part, rows in self.chunks(index):
-            c = self._cal_rows(part)
-            m = c.shape[0]
-            wr = w[rows]
-            wy = wr * y[rows]
-            wv = wr.reshape(m, 3)
-            wyv = wy.reshape(m, 3)
-            e = [bl.rows(part) for bl in self.blocks]
-            for i in range(3):
-                cw = c * wv[:, i, None]
-                g_cc[i] += cw.T @ c
-                r_c[i] += c.T @ wyv[:, i]
-                for j, ej in enumerate(e):
-                    g_ce[j][i] += cw.T @ ej[:, i, :]
-            flat = [ej.reshape(3 * m, -1) for ej in e]
-            for j, fj in enumerate(flat):
-                fw = fj * wr[:, None]
-                r_e[j] += fj.T @ wy
-                for k in range(j, len(flat)):
-                    g_ee[j, k] += fw.T @ flat[k]
+            a_axes = self._axis_design(part)
+            m = a_axes[0].shape[0]
+            wv = w[rows].reshape(m, 3)
+            yv = y[rows].reshape(m, 3)
+            for i, a in enumerate(a_axes):
+                aw = a * wv[:, i, None]
+                grams[i] += aw.T @ a
+                rhss[i] += aw.T @ yv[:, i]
         gram = np.zeros((self.p, self.p))
         rhs = np.zeros(self.p)
-        for i in range(3):
-            idx = _CAL_COLUMNS[i]
-            gram[np.ix_(idx, idx)] = g_cc[i]
-            rhs[idx] = r_c[i]
-        offsets = np.cumsum([12, *widths]).tolist()
-        for j, q in enumerate(widths):
-            cols = slice(offsets[j], offsets[j] + q)
-            for i in range(3):
-                idx = _CAL_COLUMNS[i]
-                gram[idx, cols] = g_ce[j][i]
-                gram[cols, idx] = g_ce[j][i].T
-            rhs[cols] = r_e[j]
-            for k in range(j, len(widths)):
-                other = slice(offsets[k], offsets[k] + widths[k])
-                gram[cols, other] = g_ee[j, k]
-                gram[other, cols] = g_ee[j, k].T
+        for ix, g_i, r_i in zip(axis_index, grams, rhss, strict=True):
+            gram[np.ix_(ix, ix)] += g_i
+            rhs[ix] += r_i
         inv = 1.0 / self.scale
         return gram * np.outer(inv, inv), rhs * inv
 
@@ -246,13 +241,10 @@ class BlockedDesign:
         """``y - X theta`` over the rows of the samples ``index``, shape (3 index.size,)."""
         out = np.empty(3 * index.size)
         raw = theta / self.scale  # the parameters of the unscaled columns
-        theta_cal = np.stack([raw[idx] for idx in _CAL_COLUMNS], axis=1)  # (4, 3)
-        widths = [bl.width for bl in self.blocks]
-        offsets = np.cumsum([12, *widths]).tolist()
+        theta_axes = [raw[ix] for ix in self._axis_index()]
         for part, rows in self.chunks(index):
-            pred = self._cal_rows(part) @ theta_cal
-            for bl, lo, q in zip(self.blocks, offsets, widths, strict=False):
-                pred += bl.rows(part) @ raw[lo : lo + q]
+            a_axes = self._axis_design(part)
+            pred = np.column_stack([a @ t for a, t in zip(a_axes, theta_axes, strict=True)])
             out[rows] = y[rows] - pred.reshape(-1)
         return out
 

@@ -81,6 +81,30 @@ class PerAxisColumns:
         self.width = 3 * len(self.kinds)
         self.axis_major = axis_major
 
+    def axis_columns(self) -> list[npt.NDArray[np.intp]]:
+        """Per sensor axis, the columns that are not zero on that axis's rows."""
+        n_kinds = len(self.kinds)
+        return [
+            np.array(
+                [n_kinds * i + k if self.axis_major else 3 * k + i for k in range(n_kinds)],
+                dtype=np.intp,
+            )
+            for i in range(3)
+        ]
+
+    def axis_rows(self, index: Index) -> list[FloatArray]:
+        """Per sensor axis, the values of :meth:`axis_columns` at the samples ``index``,
+        (m, K) each: the block without its zeros."""
+        values = [_take(x, index) for x in self.kinds]
+        m = values[0].shape[0]
+        out = []
+        for i in range(3):
+            a = np.empty((m, len(values)))
+            for k, x in enumerate(values):
+                a[:, k] = x if x.ndim == 1 else x[:, i]
+            out.append(a)
+        return out
+
     def __call__(self, index: Index) -> FloatArray:
         values = [_take(x, index) for x in self.kinds]
         m = values[0].shape[0]

@@ -443,6 +443,21 @@ class DesignBlock:
             return self.source(index)
         return self.source[index]
 
+    def axis_columns(self) -> list[npt.NDArray[np.intp]]:
+        """Per sensor axis, the parameters whose regressors are not all zero on that axis's rows
+        (all of them unless the block acts on one axis per column)."""
+        if isinstance(self.source, PerAxisColumns):
+            return self.source.axis_columns()
+        return [np.arange(self.width)] * 3
+
+    def axis_rows(self, index: Index) -> list[FloatArray]:
+        """Per sensor axis ``i``, the regressors of :meth:`axis_columns` on axis ``i``'s rows of
+        the samples ``index``, (m, len(axis_columns()[i])) each."""
+        if isinstance(self.source, PerAxisColumns):
+            return self.source.axis_rows(index)
+        g = self.rows(index)
+        return [g[:, i, :] for i in range(3)]
+
     @property
     def g(self) -> FloatArray:
         """All regressors, shape (N, 3, p) (built whole: for small data and checks)."""
