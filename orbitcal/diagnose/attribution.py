@@ -824,12 +824,12 @@ class Candidate:
 #: 10 (2 ln of the Bayes factor) is not "very strong" evidence (Kass & Raftery 1995).
 NEAR_TWIN_BIC = 10.0
 
-#: The pair step fits in full only pairs whose screened held-out RMS (one weighted pass,
-#: :meth:`Selection._screen_rms`) shrinks by this fraction of ``min_gain`` at least, and stops once
-#: the screened RMS exceeds the best full fit that passed by ``PAIR_SCREEN_MARGIN``. Measured on
-#: the 36 pairs of the first 16 compound-benchmark worlds (seed 1): screened and full held-out
-#: RMS differ by 0.054 % at most (the weights of a model one effect short are close to the final
-#: ones), far inside both margins. [-]
+#: The pair step fits in full only pairs whose screened held-out RMS (one weighted solve,
+#: :meth:`Selection._screen_pairs`) shrinks by this fraction of ``min_gain`` at least, and
+#: stops once the screened RMS exceeds the best full fit that passed by ``PAIR_SCREEN_MARGIN``.
+#: Measured on the 36 pairs of the first 16 compound-benchmark worlds (seed 1): screened and
+#: full held-out RMS differ by 0.054 % at most (the weights of a model one effect short are
+#: close to the final ones), far inside both margins. [-]
 PAIR_SCREEN_GAIN = 0.5
 PAIR_SCREEN_MARGIN = 0.02
 #: The screen fits every k-th training sample and scores every k-th held-out one, at most this
@@ -1199,7 +1199,8 @@ class Selection:
         return out
 
     def _screen_rms(self, fixed: Sequence[DesignBlock], extra: Sequence[DesignBlock]) -> float:
-        """Held-out RMS of ``fixed + extra`` fitted once with the screen's fixed weights."""
+        """Held-out RMS of ``fixed + extra`` fitted once with the screen's fixed weights (one
+        :func:`fit_joint`: the reference :meth:`_screen_pairs` equals, pair by pair)."""
         assert self._screen_weights is not None and self._screen_train is not None
         blocks = [*fixed, *extra]
         fit = fit_joint(
