@@ -929,16 +929,22 @@ class Selection:
         """Candidate ``name`` fitted after ``fixed`` and tested against ``r_before``.
 
         ``fixed_fit`` is the fit of ``fixed`` alone: an effect of ``RESIDUAL_SCANNED`` is then
-        designed again on the raw data less the fields of the fixed effects.
+        designed again beside the fixed effects (their regressors projected out with the
+        calibration's in its scan, :attr:`Effect.design_beside`), or else on the raw data less
+        their fitted fields.
         """
         block = self.designs[name]
         if name in RESIDUAL_SCANNED and fixed and fixed_fit is not None and name in self.effects:
-            others = sum(
-                (fixed_fit.effect_nt(k) for k in range(len(fixed_fit.blocks))),
-                np.zeros_like(self.data.b_raw_nt),
-            )
-            less = dataclasses.replace(self.data, b_raw_nt=self.data.b_raw_nt - others)
-            again = self.effects[name].design(less, self.train)
+            effect = self.effects[name]
+            if effect.design_beside is not None:
+                again = effect.design_beside(self.data, self.train, fixed)
+            else:
+                others = sum(
+                    (fixed_fit.effect_nt(k) for k in range(len(fixed_fit.blocks))),
+                    np.zeros_like(self.data.b_raw_nt),
+                )
+                less = dataclasses.replace(self.data, b_raw_nt=self.data.b_raw_nt - others)
+                again = effect.design(less, self.train)
             if again is not None and again.all_finite():
                 block = again
         fit, r, rms = self.evaluate(fixed, block)

@@ -499,6 +499,9 @@ class Effect:
         ``train_mask`` marks the samples a data-driven choice (e.g. a step time) may look at.
     absorbed_by_calibration : bool
         True when the 12 parameters can absorb it in some attitude regimes (needs split fits).
+    design_beside : callable, optional
+        ``design_beside(data, train, fixed)``: the design found beside already selected effects
+        (their regressors fitted jointly with it), for designs found by a scan of the data.
     """
 
     name: str
@@ -506,6 +509,9 @@ class Effect:
     witness: str
     design: DesignFn
     absorbed_by_calibration: bool = False
+    design_beside: (
+        Callable[[DiagnosisData, BoolArray, Sequence[DesignBlock]], DesignBlock | None] | None
+    ) = None
 
 
 def _tau_days(data: DiagnosisData, train: BoolArray) -> FloatArray:
@@ -814,6 +820,9 @@ def _fac_columns(
 #: Periods scanned for the attitude-error sinusoids [s] (log-spaced), and how many are kept.
 ATTITUDE_PERIODS_S = np.geomspace(1200.0, 30000.0, 160)
 ATTITUDE_MAX_TERMS = 3
+#: At most this many passes of the cyclic period refinement (it stops at the first pass that
+#: changes no period).
+ATTITUDE_REFINE_PASSES = 8
 
 #: Samples per block of the batched period scan (memory ~ periods x block x 8 B per array).
 SCAN_BLOCK_SAMPLES = 4096
@@ -831,17 +840,21 @@ def _rotation_columns(data: DiagnosisData, index: Index | None = None) -> FloatA
     return np.stack([np.cross(np.eye(3)[k], b) for k in range(3)], axis=2)
 
 
-def _design_attitude(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
+def _design_attitude(
+    data: DiagnosisData, train: BoolArray, *, fixed: Sequence[DesignBlock] = ()
+) -> DesignBlock | None:
     # A slowly varying small rotation dtheta(t) of the attitude: db = dtheta x B. The constant part
     # is a misalignment the 12 parameters absorb; the variation is a few sinusoids (thermal
     # distortion, star-tracker errors) whose periods are found by a matching-pursuit scan of the
-    # training residual (periods shorter than 80 % of the training span).
+    # training residual (periods shorter than 80 % of the training span). Beside effects already
+    # selected (``fixed``), their regressors are projected out with the calibration's: each
+    # period's gain is then what it adds to a joint fit of them all.
     t = data.t_utc_s - float(data.t_utc_s[train][0])
     span = float(t[train][-1]) if np.any(train) else 0.0
     periods = ATTITUDE_PERIODS_S[0.8 * span > ATTITUDE_PERIODS_S]
     if periods.size == 0:
         return None
-    scan = _AttitudeScan(data, train)
+    scan = _AttitudeScan(data, train, fixed)
     chosen: list[float] = []
     # The scan needs, per period, only 6 x 6 and 6 x q sums over the samples: the gain of the
     # projected columns P[R c, R s] (P = I - QQ^T, R = rotation columns, c, s = cos, sin) is
@@ -881,14 +894,19 @@ def _design_attitude(data: DiagnosisData, train: BoolArray) -> DesignBlock | Non
     if not chosen:
         return None
     # Cyclic refinement: re-fit each period with the others fixed (close periods that one
-    # training span cannot resolve at once are separated this way).
-    for _ in range(2):
+    # training span cannot resolve at once are separated this way), until a pass changes none.
+    import os as _os
+
+    for _ in range(int(_os.environ.get("ATT_PASSES", str(ATTITUDE_REFINE_PASSES)))):
+        before = list(chosen)
         for j in range(len(chosen)):
             basis = scan.basis(chosen[:j] + chosen[j + 1 :])
             r_now = scan.residual(basis)
             grid = chosen[j] * np.linspace(0.94, 1.06, 61)
             _, p_best = first_best(grid, scan.gains(grid, r_now, basis), -1.0)
             chosen[j] = p_best if p_best else chosen[j]
+        if chosen == before:
+            break
     names = [
         f"dtheta_{axis}_{fname}_{period:.0f}s_mrad"
         for period in chosen
@@ -934,13 +952,18 @@ def _cos_sin(w_rad_s: FloatArray, t_s: FloatArray) -> tuple[FloatArray, FloatArr
 class _AttitudeScan:
     """The training samples of the attitude period scan, read a block at a time.
 
-    A *basis* is the periods kept with ``R^-1`` of the columns ``X`` = (12 calibration columns,
-    then cos and sin of each period times the rotation columns): ``Q = X R^-1`` is orthonormal and
-    spans what the scan projects out; its rows are built per block of samples.
+    A *basis* is the periods kept with ``M`` for the columns ``X`` = (12 calibration columns, the
+    regressors of ``fixed``, then cos and sin of each period times the rotation columns):
+    ``Q = X M`` is orthonormal and spans what the scan projects out (``M = R^-1`` of ``X = Q R``,
+    or its pseudo-inverse when fixed regressors repeat the calibration's); its rows are built per
+    block of samples.
     """
 
-    def __init__(self, data: DiagnosisData, train: BoolArray) -> None:
+    def __init__(
+        self, data: DiagnosisData, train: BoolArray, fixed: Sequence[DesignBlock] = ()
+    ) -> None:
         self.data = data
+        self.fixed = list(fixed)
         idx = np.flatnonzero(train)
         self.idx = idx[:: max(1, -(-idx.size // SCAN_MAX_SAMPLES))]
         self.t = data.t_utc_s[self.idx] - float(data.t_utc_s[self.idx[0]])
@@ -957,8 +980,10 @@ class _AttitudeScan:
         return _rotation_columns(self.data, self.idx[a0:a1]) * 1e-3
 
     def columns(self, periods: Sequence[float], a0: int, a1: int) -> FloatArray:
-        """The columns X of the block, (3 m, 12 + 6 len(periods))."""
-        parts = [self.data.calibration_rows(self.idx[a0:a1])]
+        """The columns X of the block, (3 m, 12 + fixed + 6 len(periods))."""
+        idx = self.idx[a0:a1]
+        parts = [self.data.calibration_rows(idx)]
+        parts += [bl.rows(idx).reshape(-1, bl.width) for bl in self.fixed]
         if periods:
             rt, tt = self.rot(a0, a1), self.t[a0:a1]
             for period in periods:
@@ -972,11 +997,16 @@ class _AttitudeScan:
 
     def basis(self, periods: Sequence[float]) -> tuple[tuple[float, ...], FloatArray]:
         """The periods and ``R^-1`` of their columns (block-updated QR)."""
-        width = 12 + 6 * len(periods)
+        width = 12 + sum(bl.width for bl in self.fixed) + 6 * len(periods)
         r = np.zeros((0, width))
         for a0, a1 in self.blocks():
             r = triangular_factor(np.vstack([r, self.columns(periods, a0, a1)]))
-        return tuple(periods), np.asarray(np.linalg.inv(r))
+        if not self.fixed:
+            return tuple(periods), np.asarray(np.linalg.inv(r))
+        # X = Q R = Q U S V': X V S^-1 = Q U, orthonormal on the directions S does not cut.
+        _, s, vt = np.linalg.svd(r)
+        keep = s > 1e-10 * s[0]
+        return tuple(periods), np.asarray(vt[keep].T / s[keep])
 
     def q_rows(self, basis: tuple[tuple[float, ...], FloatArray], a0: int, a1: int) -> FloatArray:
         return np.asarray(self.columns(basis[0], a0, a1) @ basis[1])
@@ -1141,6 +1171,7 @@ CATALOGUE: tuple[Effect, ...] = (
         "vector residual perpendicular to B while the scalar residual stays clean",
         _design_attitude,
         absorbed_by_calibration=True,
+        design_beside=lambda data, train, fixed: _design_attitude(data, train, fixed=fixed),
     ),
 )
 

@@ -1,0 +1,56 @@
+"""The attitude-error period scan: beside effects already selected, and with collinear ones."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from orbitcal.data import real_tles_text
+from orbitcal.diagnose.attribution import time_blocks
+from orbitcal.diagnose.bench import plan_compound_cases, simulate_compound_world
+from orbitcal.diagnose.effects import DesignBlock, _AttitudeScan, _design_attitude, get_effect
+
+#: The simulator's attitude error: three sinusoids of 5,400 s x (1, 1.3, 0.7).
+INJECTED_PERIODS_S = (3780.0, 5400.0, 7020.0)
+
+
+@pytest.fixture(scope="module")
+def attitude_and_time_offset():
+    """A nadir world with an attitude error and a time-tag error, both at twice the default
+    (compound benchmark seed 1, world 30: the scan on the calibration-only residual picked
+    5,108 s for 5,400 s, and orbit_error stood in for the rest)."""
+    case = plan_compound_cases(40, seed=1)[30]
+    assert case.effects == ("attitude_error", "time_offset") and case.attitude == "nadir"
+    _, data = simulate_compound_world(case, tle_text=real_tles_text())
+    train, _, _ = time_blocks(data.t_utc_s)
+    return data, train
+
+
+def _periods(block: DesignBlock) -> list[float]:
+    return sorted(float(p) for p in block.variant.split("=")[1].split(","))
+
+
+def test_periods_found_beside_the_time_offset_are_the_injected_ones(attitude_and_time_offset):
+    data, train = attitude_and_time_offset
+    time_offset = get_effect("time_offset").design(data, train)
+    assert time_offset is not None
+    block = _design_attitude(data, train, fixed=[time_offset])
+    assert block is not None
+    found = _periods(block)
+    assert len(found) == 3
+    np.testing.assert_allclose(found, INJECTED_PERIODS_S, rtol=0.01)
+
+
+def test_scan_basis_stays_orthonormal_when_a_fixed_block_repeats_the_calibration(
+    attitude_and_time_offset,
+):
+    """A fixed regressor equal to a calibration column (an offset on x) leaves R singular: the
+    basis drops that direction instead of blowing up."""
+    data, train = attitude_and_time_offset
+    offset_x = np.zeros((data.n, 3, 1))
+    offset_x[:, 0, 0] = 1.0
+    scan = _AttitudeScan(data, train, [DesignBlock(offset_x, ["offset_again_nt"])])
+    basis = scan.basis([5400.0])
+    q = np.vstack([scan.q_rows(basis, a0, a1) for a0, a1 in scan.blocks()])
+    assert q.shape[1] == 12 + 6  # the repeated offset contributes no direction
+    np.testing.assert_allclose(q.T @ q, np.eye(q.shape[1]), atol=1e-8)
