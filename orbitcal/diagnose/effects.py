@@ -895,9 +895,7 @@ def _design_attitude(
         return None
     # Cyclic refinement: re-fit each period with the others fixed (close periods that one
     # training span cannot resolve at once are separated this way), until a pass changes none.
-    import os as _os
-
-    for _ in range(int(_os.environ.get("ATT_PASSES", str(ATTITUDE_REFINE_PASSES)))):
+    for _ in range(ATTITUDE_REFINE_PASSES):
         before = list(chosen)
         for j in range(len(chosen)):
             basis = scan.basis(chosen[:j] + chosen[j + 1 :])
