@@ -819,6 +819,14 @@ class Candidate:
         return self.fit.blocks[-1]
 
 
+#: Effects the data of a few orbits hardly tell apart: a time-tag error moves each sample along
+#: the track relative to the Earth, a constant along-track error of the element set along the
+#: inertial velocity; the two differ by the Earth's rotation only (0.46 km/s x cos(latitude) of
+#: 7.6 km/s, across the track). When one is selected, the other's simplest form (one parameter,
+#: in its place beside the other selected effects) is fitted too and, if the held-out blocks
+#: cannot tell it worse, listed as indistinguishable from it (:meth:`Selection.near_twins`).
+NEAR_TWINS: dict[str, str] = {"time_offset": "orbit_error", "orbit_error": "time_offset"}
+
 #: Tied candidates (held-out chunks cannot tell them apart) whose training BIC exceeds the
 #: winner's by less than this are reported as indistinguishable from it: a BIC difference below
 #: 10 (2 ln of the Bayes factor) is not "very strong" evidence (Kass & Raftery 1995).
@@ -1041,6 +1049,32 @@ class Selection:
             )
         )
         return best, twins
+
+    def near_twins(self, chosen: Sequence[Candidate]) -> dict[str, str]:
+        """For each selected effect with a :data:`NEAR_TWINS` partner not selected: the partner,
+        if the final model with the effect replaced by the partner's simplest form (beside the
+        same other effects) is not worse on the held-out blocks (within ``TIE_MAX_GAP`` and not
+        significantly by the chunk test)."""
+        names = {c.name for c in chosen}
+        out: dict[str, str] = {}
+        full: tuple[FloatArray, float] | None = None
+        for c in chosen:
+            partner = NEAR_TWINS.get(c.name)
+            if partner is None or partner in names or partner not in self.designs:
+                continue
+            if full is None:
+                _, r_full, rms_full = self.fit([x.block for x in chosen])
+                full = (r_full, rms_full)
+            base = self.designs[partner]
+            simple = DesignBlock(base.source, base.names, base.variant)
+            others = [x.block for x in chosen if x is not c]
+            _, r, rms = self.fit([*others, simple])
+            if not rms <= full[1] * (1.0 + TIE_MAX_GAP):
+                continue
+            hold = self.holdout
+            if _chunk_test(r[hold], full[0][hold], self.n_chunks)[0] >= self.alpha:
+                out[c.name] = partner
+        return out
 
     def pair(
         self,
@@ -1334,6 +1368,9 @@ def attribute(
     chosen, indistinguishable, dropped = _stepwise(
         sel, single, base_rms, r_base, max_steps, implausible
     )
+    for name, partner in sel.near_twins(chosen).items():
+        if partner not in indistinguishable.get(name, []):
+            indistinguishable[name] = sorted([*indistinguishable.get(name, []), partner])
     selected = [c.name for c in chosen]
     chosen_blocks = [c.block for c in chosen]
 
