@@ -94,13 +94,12 @@ def _world(kind: str, i: int, rng: np.random.Generator, tle_text: str) -> dict[s
         # diagnosis' parameterisation gives that field (A scales it by a few per cent).
         from orbitcal.diagnose.attribution import _calibration_basis
 
-        f = (sum(world.injected_body_nt.values()) @ a.T)[att.train].reshape(-1)
+        f = (sum(world.injected_body_nt.values()) @ a.T)[att.train]
         col = data.db_ref_body_dt_nt_s if kind == "dt_s" else data.b_crust_body_nt
-        g = np.asarray(col)[att.train].reshape(-1)
-        q = _calibration_basis(data, att.train)
-        f = f - q @ (q.T @ f)
-        g = g - q @ (q.T @ g)
-        value = float(f @ g / (g @ g))
+        g = np.asarray(col)[att.train]
+        basis = _calibration_basis(data, att.train)  # Q^T of a field, without forming Q
+        qf, qg = basis.project(f), basis.project(g)
+        value = float((np.sum(f * g) - qf @ qg) / (np.sum(g * g) - qg @ qg))
         truth = {kind: value}
         nominal = -lateness if kind == "dt_s" else amp
     elif kind == "offset_nt_per_degc":
