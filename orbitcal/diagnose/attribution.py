@@ -42,7 +42,6 @@ import numpy.typing as npt
 from orbitcal.arrays import BoolArray, FloatArray, IntArray
 from orbitcal.diagnose.blocked import BlockedDesign
 from orbitcal.diagnose.bounds import consistency_reasons, param_range
-from orbitcal.diagnose.columns import chunk_slices, triangular_factor
 from orbitcal.diagnose.effects import (
     CATALOGUE,
     FIELD_SCALE_NT,
@@ -50,6 +49,7 @@ from orbitcal.diagnose.effects import (
     DiagnosisData,
     Effect,
 )
+from orbitcal.diagnose.prior import CalibrationPrior
 from orbitcal.diagnose.signed_rank import signed_rank_greater_p
 from orbitcal.metrics import norm_rms_nt
 
@@ -135,10 +135,8 @@ class JointFit:
                     out.append(name)
         return out
 
-    def effect_nt(self, k: int, g: FloatArray | None = None) -> FloatArray:
+    def effect_nt(self, k: int) -> FloatArray:
         """The field block ``k`` adds at every sample [nT], shape (N, 3)."""
-        if g is not None:
-            return np.asarray(g @ self.coef[k])
         return self.blocks[k].apply(self.coef[k])
 
     def predict_nt(self, data: DiagnosisData) -> FloatArray:
@@ -220,20 +218,26 @@ def fit_joint(
     prior = data.calibration_prior if use_prior else None
     prior_precision = np.zeros(p)
     prior_mean = np.zeros(p)
+    plain_noise: float | None = None  # the noise of the same model by plain least squares
+
+    def noise_of_plain_fit() -> float:
+        nonlocal plain_noise
+        if plain_noise is None:
+            theta0 = _plain_least_squares(design, index, y)
+            plain_noise = _robust_sigma(design.residual(index, y, theta0))
+        return plain_noise
+
     if prior is not None:
-        # Unit-scaled parameters: theta_s = theta * scale, theta = (A * FIELD_SCALE_NT, o, ...).
-        sd = np.r_[np.full(9, prior.sigma_a * FIELD_SCALE_NT), np.full(3, prior.sigma_o_nt)]
-        prior_precision[:12] = 1.0 / (sd * scale[:12]) ** 2
-        prior_mean[:12] = np.r_[prior.a.ravel() * FIELD_SCALE_NT, prior.o_nt] * scale[:12]
+        prior_mean[:12], prior_precision[:12] = _calibration_prior_terms(prior, scale)
         # The data term is unweighted by the noise, so the prior is scaled by the noise variance:
         # that of the same model fitted without the prior when the rows allow it (else of the
         # prior calibration itself), fixed, so that a prior at odds with the data cannot inflate
         # its own weight through the residual.
         if n_rows > 2 * p + 30:
-            r0 = design.residual(index, y, _plain_least_squares(design, index, y))
+            noise = noise_of_plain_fit()
         else:
-            r0 = design.residual(index, y, np.r_[prior_mean[:12], np.zeros(p - 12)])
-        noise = max(float(1.4826 * np.median(np.abs(r0 - np.median(r0)))), 1e-6)
+            theta_prior = np.r_[prior_mean[:12], np.zeros(p - 12)]
+            noise = _robust_sigma(design.residual(index, y, theta_prior))
         prior_precision *= noise**2
     lo_s, hi_s = _scaled_bounds(blocks, scale) if bounded else (None, None)
     if bounded:
@@ -241,8 +245,7 @@ def fit_joint(
         # weighted by the noise of a fit without them (fixed, as for the calibration prior).
         pm, pp = _effect_priors(blocks, scale)
         if np.any(pp > 0.0):
-            r0 = design.residual(index, y, _plain_least_squares(design, index, y))
-            noise = max(float(1.4826 * np.median(np.abs(r0 - np.median(r0)))), 1e-6)
+            noise = noise_of_plain_fit()
             prior_mean = np.where(pp > 0.0, pm, prior_mean)
             prior_precision = prior_precision + pp * noise**2
     theta_prev: FloatArray | None = None
@@ -260,7 +263,7 @@ def fit_joint(
         if lo_s is not None and hi_s is not None and (np.any(theta < lo_s) or np.any(theta > hi_s)):
             theta = _box_solve(normal, rhs, lo_s, hi_s, theta)
         r = design.residual(index, y, theta)
-        sigma = max(float(1.4826 * np.median(np.abs(r - np.median(r)))), 1e-6)
+        sigma = _robust_sigma(r)
         if not robust or it == iterations - 1:
             break
         last_phase = huber_steps >= iterations - 1 or it >= huber_steps + 2
@@ -305,6 +308,22 @@ def fit_joint(
         bounded=bounded,
         train_rss_nt2=float(r @ r),
     )
+
+
+def _robust_sigma(r: FloatArray) -> float:
+    """Noise level from the median absolute deviation (1.4826 MAD, Gaussian-consistent) [nT],
+    floored at 1e-6."""
+    return max(float(1.4826 * np.median(np.abs(r - np.median(r)))), 1e-6)
+
+
+def _calibration_prior_terms(
+    prior: CalibrationPrior, scale: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Mean and precision (before the noise variance) of the prior on the 12 unit-scaled
+    calibration parameters: theta_s = theta * scale, theta = (A * FIELD_SCALE_NT, o)."""
+    sd = np.r_[np.full(9, prior.sigma_a * FIELD_SCALE_NT), np.full(3, prior.sigma_o_nt)]
+    mean = np.r_[prior.a.ravel() * FIELD_SCALE_NT, prior.o_nt] * scale[:12]
+    return mean, 1.0 / (sd * scale[:12]) ** 2
 
 
 def _plain_least_squares(design: BlockedDesign, index: IntArray, y: FloatArray) -> FloatArray:
@@ -550,11 +569,9 @@ class _CalibrationBasis:
 def _calibration_basis(data: DiagnosisData, train: BoolArray) -> _CalibrationBasis:
     """The calibration's orthonormal basis on the training rows, in factored form."""
     idx = np.flatnonzero(train)
-    r = np.zeros((0, 12))
-    for part in chunk_slices(idx.size):
-        r = triangular_factor(np.vstack([r, data.calibration_rows(idx[part])]))
-    r_inv = np.asarray(np.linalg.inv(r), dtype=np.float64)
-    return _CalibrationBasis(data.b_ref_body_nt[idx] / FIELD_SCALE_NT, r_inv)
+    return _CalibrationBasis(
+        data.b_ref_body_nt[idx] / FIELD_SCALE_NT, data.calibration_r_inv_of(idx)
+    )
 
 
 def _absorbed_fraction(
@@ -1135,8 +1152,7 @@ class Selection:
         """Fixed Huber weights of the screen (k = 2.5 sigma, as :func:`fit_joint`) from the
         residual of the model without the screened effects, and the screen's samples: every
         k-th training and held-out sample, at most ``PAIR_SCREEN_SAMPLES`` of each."""
-        r = r_before[self.train]
-        sigma = max(float(1.4826 * np.median(np.abs(r - np.median(r)))), 1e-6)
+        sigma = _robust_sigma(r_before[self.train])
         u = np.abs(r_before) / (2.5 * sigma)
         self._screen_weights = np.where(u <= 1.0, 1.0, 1.0 / np.maximum(u, 1e-12))
         idx = np.flatnonzero(self.train)
@@ -1213,14 +1229,10 @@ class Selection:
                 # by plain least squares (one pass over the screen's samples)
                 theta0 = np.linalg.lstsq(plain[0][sub], plain[1][cols], rcond=1e-13)[0]
                 r0 = BlockedDesign(self.data, [*fixed, a, b]).residual(index, y, theta0)
-                noise = max(float(1.4826 * np.median(np.abs(r0 - np.median(r0)))), 1e-6)
+                noise = _robust_sigma(r0)
                 if prior is not None:
-                    sd = np.r_[
-                        np.full(9, prior.sigma_a * FIELD_SCALE_NT), np.full(3, prior.sigma_o_nt)
-                    ]
-                    prior_precision[:12] = noise**2 / (sd * scale[:12]) ** 2
-                    prior_mean[:12] = np.r_[prior.a.ravel() * FIELD_SCALE_NT, prior.o_nt]
-                    prior_mean[:12] *= scale[:12]
+                    prior_mean[:12], prior_precision[:12] = _calibration_prior_terms(prior, scale)
+                    prior_precision *= noise**2
                 prior_mean = np.where(pp[cols] > 0.0, pm[cols], prior_mean)
                 prior_precision = prior_precision + pp[cols] * noise**2
             normal = gram[sub] + np.diag(ridge[cols] + prior_precision)
@@ -1776,13 +1788,14 @@ def _regional_fac(
         g = g_hi[rows].reshape(-1, width)
         grams[f] = g.T @ g
         rhss[f] = g.T @ r_hi[rows].reshape(-1)
+    gram_all, rhs_all = grams.sum(axis=0), rhss.sum(axis=0)
     pred = np.zeros((idx.size, 3))
     for f in range(FAC_CV_FOLDS):
         test_rows = fold == f
         if not np.any(test_rows):
             continue
-        gram = grams.sum(axis=0) - grams[f]
-        rhs = rhss.sum(axis=0) - rhss[f]
+        gram = gram_all - grams[f]
+        rhs = rhs_all - rhss[f]
         coef = np.linalg.lstsq(gram, rhs, rcond=None)[0]
         pred[test_rows] = g_hi[test_rows] @ coef
     rms_after = norm_rms_nt(r_now[hi] - pred)

@@ -106,6 +106,7 @@ class BlockedDesign:
         self.p = 12 + sum(len(bl.names) for bl in self.blocks)
         self.block_samples = int(FIT_BLOCK_SAMPLES if block_samples is None else block_samples)
         self.scale = self._column_scales()
+        self._axis_index = self._axis_columns()
 
     # -- rows --------------------------------------------------------------------------------
 
@@ -180,27 +181,22 @@ class BlockedDesign:
         c[:, 3] = 1.0
         return c
 
-    def _axis_index(self) -> list[IntArray]:
+    def _axis_columns(self) -> list[IntArray]:
         """Per sensor axis, the columns of ``X`` that are not zero on that axis's rows: its four
         calibration columns, then each block's :meth:`DesignBlock.axis_columns`."""
-        cached = self.__dict__.get("_axis_index_cache")
-        if cached is not None:
-            return list(cached)
         offsets = np.cumsum([12, *[bl.width for bl in self.blocks]]).tolist()
         per_block = [bl.axis_columns() for bl in self.blocks]
-        out = [
+        return [
             np.concatenate(
                 [np.array(_CAL_COLUMNS[i])]
                 + [lo + cols[i] for lo, cols in zip(offsets, per_block, strict=False)]
             ).astype(np.intp)
             for i in range(3)
         ]
-        self.__dict__["_axis_index_cache"] = out
-        return list(out)
 
     def _axis_design(self, part: IntArray | slice) -> list[FloatArray]:
         """Per sensor axis, that axis's rows of ``X`` (unscaled) without the columns that are
-        zero there, (m, len(_axis_index()[i])) each."""
+        zero there, (m, len(_axis_index[i])) each."""
         c = self._cal_rows(part)
         per_block = [bl.axis_rows(part) for bl in self.blocks]
         if not per_block:
@@ -217,7 +213,7 @@ class BlockedDesign:
         columns, and two thirds of a block that acts on one axis per column), unscaled, then
         added into place and scaled once. The dense rows are never assembled.
         """
-        axis_index = self._axis_index()
+        axis_index = self._axis_index
         grams = [np.zeros((ix.size, ix.size)) for ix in axis_index]
         rhss = [np.zeros(ix.size) for ix in axis_index]
         for part, rows in self.chunks(index):
@@ -241,7 +237,7 @@ class BlockedDesign:
         """``y - X theta`` over the rows of the samples ``index``, shape (3 index.size,)."""
         out = np.empty(3 * index.size)
         raw = theta / self.scale  # the parameters of the unscaled columns
-        theta_axes = [raw[ix] for ix in self._axis_index()]
+        theta_axes = [raw[ix] for ix in self._axis_index]
         for part, rows in self.chunks(index):
             a_axes = self._axis_design(part)
             pred = np.column_stack([a @ t for a, t in zip(a_axes, theta_axes, strict=True)])

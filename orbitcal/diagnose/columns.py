@@ -14,7 +14,7 @@ element (the same operations on the same numbers).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from typing import Protocol, TypeAlias
 
 import numpy as np
@@ -30,6 +30,7 @@ __all__ = [
     "PerAxisColumns",
     "ScaledVectorColumns",
     "chunk_slices",
+    "take",
     "triangular_factor",
 ]
 
@@ -57,13 +58,18 @@ def chunk_slices(n: int, step: int = CHUNK_SAMPLES) -> list[slice]:
     return [slice(a, min(a + step, n)) for a in range(0, n, step)]
 
 
-def triangular_factor(x: FloatArray) -> FloatArray:
-    """The triangular factor ``R`` of ``x = Q R`` (``Q`` not formed). Stacked on the next rows
-    and factorised again, it updates block by block to the factor of all rows."""
-    return np.asarray(np.linalg.qr(x, mode="r"))  # type: ignore[call-overload]
+def triangular_factor(row_blocks: Iterable[FloatArray], width: int) -> FloatArray:
+    """The triangular factor ``R`` (width x width) of the rows of ``row_blocks`` stacked,
+    ``X = Q R`` (``Q`` not formed): the factor so far stacked on the next block and factorised
+    again, so that only one block of rows is held at a time."""
+    r = np.zeros((0, width))
+    for rows in row_blocks:
+        r = np.asarray(np.linalg.qr(np.vstack([r, rows]), mode="r"))  # type: ignore[call-overload]
+    return r
 
 
-def _take(factor: Factor, index: Index) -> FloatArray:
+def take(factor: Factor, index: Index) -> FloatArray:
+    """The values of a per-sample factor at the samples ``index``."""
     return np.asarray(factor(index)) if callable(factor) else factor[index]
 
 
@@ -95,7 +101,7 @@ class PerAxisColumns:
     def axis_rows(self, index: Index) -> list[FloatArray]:
         """Per sensor axis, the values of :meth:`axis_columns` at the samples ``index``,
         (m, K) each: the block without its zeros."""
-        values = [_take(x, index) for x in self.kinds]
+        values = [take(x, index) for x in self.kinds]
         m = values[0].shape[0]
         out = []
         for i in range(3):
@@ -106,7 +112,7 @@ class PerAxisColumns:
         return out
 
     def __call__(self, index: Index) -> FloatArray:
-        values = [_take(x, index) for x in self.kinds]
+        values = [take(x, index) for x in self.kinds]
         m = values[0].shape[0]
         n_kinds = len(values)
         out = np.zeros((m, 3, self.width))
@@ -132,18 +138,18 @@ class ScaledVectorColumns:
     def __call__(self, index: Index) -> FloatArray:
         cache: dict[int, FloatArray] = {}
 
-        def take(f: Factor) -> FloatArray:
+        def values(f: Factor) -> FloatArray:  # each factor once, even if shared by columns
             if id(f) not in cache:
-                cache[id(f)] = _take(f, index)
+                cache[id(f)] = take(f, index)
             return cache[id(f)]
 
-        first = take(self.vectors[0])
+        first = values(self.vectors[0])
         out = np.empty((first.shape[0], 3, self.width))
         for k, (v, s) in enumerate(zip(self.vectors, self.scalars, strict=True)):
             if s is None:
-                out[:, :, k] = take(v)
+                out[:, :, k] = values(v)
             else:
-                np.multiply(take(v), take(s)[:, None], out=out[:, :, k])
+                np.multiply(values(v), values(s)[:, None], out=out[:, :, k])
         return out
 
 

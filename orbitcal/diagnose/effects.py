@@ -39,6 +39,7 @@ from orbitcal.diagnose.columns import (
     PerAxisColumns,
     ScaledVectorColumns,
     chunk_slices,
+    take,
     triangular_factor,
 )
 from orbitcal.diagnose.prior import CalibrationPrior
@@ -195,16 +196,18 @@ class DiagnosisData:
             x[:, i, 9 + i] = 1.0
         return x.reshape(-1, 12)
 
+    def calibration_r_inv_of(self, index: npt.NDArray[np.intp]) -> FloatArray:
+        """Inverse ``R^-1`` (12, 12) of the triangular factor of the 12 calibration columns on
+        the samples ``index``, ``X = Q R``: an orthonormal basis of the calibration there is
+        ``X R^-1``, built a block of samples at a time (the whole 3N x 12 ``Q``, 288 B per
+        sample, is never held)."""
+        blocks = (self.calibration_rows(index[part]) for part in chunk_slices(index.size))
+        return np.asarray(np.linalg.inv(triangular_factor(blocks, 12)), dtype=np.float64)
+
     @cached_property
     def calibration_r_inv(self) -> FloatArray:
-        """Inverse ``R^-1`` (12, 12) of the triangular factor of the 12 calibration columns
-        ``X = Q R``: an orthonormal basis of the calibration is ``X R^-1``, built a block of
-        samples at a time (the whole 3N x 12 ``Q``, 288 B per sample, is never held). ``R`` is
-        updated block by block (a QR of the previous factor stacked on the new rows)."""
-        r = np.zeros((0, 12))
-        for part in chunk_slices(self.n):
-            r = triangular_factor(np.vstack([r, self.calibration_rows(part)]))
-        return np.asarray(np.linalg.inv(r))
+        """:meth:`calibration_r_inv_of` all samples, computed once per data set."""
+        return self.calibration_r_inv_of(np.arange(self.n))
 
     @property
     def n(self) -> int:
@@ -630,9 +633,9 @@ def _recovery_decay(t_rel_s: FloatArray, tau_h: float, index: Index) -> FloatArr
     return np.asarray(np.exp(-t_rel_s[index] / (tau_h * 3600.0)))
 
 
-def _scaled_by(b_nt: FloatArray, x: FloatArray, index: Index) -> FloatArray:
+def _scaled_by(b_nt: FloatArray, x: Factor, index: Index) -> FloatArray:
     """``x * b / FIELD_SCALE_NT`` of the samples ``index``, (m, 3)."""
-    return np.asarray(x[index][:, None] * (b_nt[index] / FIELD_SCALE_NT))
+    return np.asarray(take(x, index)[:, None] * (b_nt[index] / FIELD_SCALE_NT))
 
 
 def _field_power(b_nt: FloatArray, power: int, index: Index) -> FloatArray:
@@ -734,7 +737,7 @@ def _design_drift(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
     for frac in np.linspace(0.1, 0.9, 17):
         ts = float(t_train[0] + frac * span)
         step = partial(_step_at, data.t_utc_s, ts)
-        kinds: list[Factor] = [step, partial(_scaled_by_step, b, data.t_utc_s, ts), tau]
+        kinds: list[Factor] = [step, partial(_scaled_by, b, step), tau]
         steps.append(
             DesignBlock(PerAxisColumns(data.n, kinds), names, variant=f"step@{ts:.0f}+trend")
         )
@@ -744,12 +747,6 @@ def _design_drift(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
 def _step_at(t_s: FloatArray, ts: float, index: Index) -> FloatArray:
     """1 from the time ``ts`` on, 0 before, at the samples ``index``."""
     return np.asarray((t_s[index] >= ts).astype(float))
-
-
-def _scaled_by_step(b_nt: FloatArray, t_s: FloatArray, ts: float, index: Index) -> FloatArray:
-    """The step times ``b / FIELD_SCALE_NT`` at the samples ``index``, (m, 3)."""
-    h = _step_at(t_s, ts, index)
-    return np.asarray(h[:, None] * (b_nt[index] / FIELD_SCALE_NT))
 
 
 #: Magnetic-latitude centres [deg] and width [deg] of the field-aligned-current basis bumps.
@@ -782,13 +779,21 @@ def _design_fac(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
     return DesignBlock(FunctionColumns(data.n, len(bumps), fn), names)
 
 
-def _fac_bump(mlat_deg: FloatArray, sign: float, centre_deg: float) -> FloatArray:
-    """A latitude bump of the field-aligned-current basis (zero equatorward of its range)."""
+def _fac_bumps(mlat_deg: FloatArray, sign: float, centres_deg: Sequence[float]) -> FloatArray:
+    """Latitude bumps of the field-aligned-current basis of one hemisphere, (N, len(centres)):
+    zero equatorward of their range, all centres in one exponential."""
     x = sign * mlat_deg
-    on = x >= FAC_MIN_MLAT_DEG - 3 * FAC_WIDTH_DEG
-    bump = np.zeros_like(x)
-    bump[on] = np.exp(-0.5 * ((x[on] - centre_deg) / FAC_WIDTH_DEG) ** 2)
-    return bump
+    on = np.flatnonzero(x >= FAC_MIN_MLAT_DEG - 3 * FAC_WIDTH_DEG)
+    out = np.zeros((x.shape[0], len(centres_deg)))
+    if on.size and len(centres_deg):
+        d = (x[on, None] - np.asarray(centres_deg, dtype=float)) / FAC_WIDTH_DEG
+        out[on] = np.exp(-0.5 * d**2)
+    return out
+
+
+def _fac_bump(mlat_deg: FloatArray, sign: float, centre_deg: float) -> FloatArray:
+    """One latitude bump of the field-aligned-current basis (:func:`_fac_bumps`)."""
+    return _fac_bumps(mlat_deg, sign, [centre_deg])[:, 0]
 
 
 def _fac_columns(
@@ -803,17 +808,12 @@ def _fac_columns(
     mods = {} if phi is None else {"_sin_mlt": np.sin(phi[index]), "_cos_mlt": np.cos(phi[index])}
     weights = np.zeros((mlat.shape[0], len(bumps)))
     for sign in (1.0, -1.0):
-        # every bump of a hemisphere at once, on the samples within reach of its bumps
         centres = sorted({c for sg, c, _ in bumps if sg == sign})
-        x = sign * mlat
-        on = np.flatnonzero(x >= FAC_MIN_MLAT_DEG - 3 * FAC_WIDTH_DEG)
-        if not centres or on.size == 0:
-            continue
-        values = np.exp(-0.5 * ((x[on, None] - np.array(centres)) / FAC_WIDTH_DEG) ** 2)
+        values = _fac_bumps(mlat, sign, centres)
         for k, (sg, c, suffix) in enumerate(bumps):
             if sg == sign:
                 w = values[:, centres.index(c)]
-                weights[on, k] = w * mods[suffix][on] if suffix in mods else w
+                weights[:, k] = w * mods[suffix] if suffix in mods else w
     return np.asarray(east[:, :, None] * weights[:, None, :])
 
 
@@ -996,9 +996,7 @@ class _AttitudeScan:
     def basis(self, periods: Sequence[float]) -> tuple[tuple[float, ...], FloatArray]:
         """The periods and ``R^-1`` of their columns (block-updated QR)."""
         width = 12 + sum(bl.width for bl in self.fixed) + 6 * len(periods)
-        r = np.zeros((0, width))
-        for a0, a1 in self.blocks():
-            r = triangular_factor(np.vstack([r, self.columns(periods, a0, a1)]))
+        r = triangular_factor((self.columns(periods, a0, a1) for a0, a1 in self.blocks()), width)
         if not self.fixed:
             return tuple(periods), np.asarray(np.linalg.inv(r))
         # X = Q R = Q U S V': X V S^-1 = Q U, orthonormal on the directions S does not cut.
