@@ -54,3 +54,37 @@ def test_scan_basis_stays_orthonormal_when_a_fixed_block_repeats_the_calibration
     q = np.vstack([scan.q_rows(basis, a0, a1) for a0, a1 in scan.blocks()])
     assert q.shape[1] == 12 + 6  # the repeated offset contributes no direction
     np.testing.assert_allclose(q.T @ q, np.eye(q.shape[1]), atol=1e-8)
+
+
+@pytest.fixture(scope="module")
+def attitude_time_offset_external():
+    """A nadir world with a time-tag error (twice the default), a ring-current field and an
+    attitude error (compound benchmark seed 51, world 17: nothing was named before the beam)."""
+    case = plan_compound_cases(18, seed=51)[17]
+    assert set(case.effects) == {"time_offset", "external_field", "attitude_error"}
+    _, data = simulate_compound_world(case, tle_text=real_tles_text())
+    train, _, _ = time_blocks(data.t_utc_s)
+    return data, train
+
+
+@pytest.mark.parametrize("beam", [1, 3])
+def test_beam_search_finds_the_periods_a_greedy_scan_locks_out(
+    attitude_time_offset_external, monkeypatch, beam
+):
+    """Beside the time offset and the ring current, the greedy scan (a beam of one) takes a first
+    period from the mixture of the three sinusoids and ends at 6,576 / 4,238 / 9,189 s, twice the
+    training residual of the injected periods; a beam of three sets finds them."""
+    import orbitcal.diagnose.effects as effects
+
+    data, train = attitude_time_offset_external
+    fixed = [
+        b
+        for b in (get_effect(n).design(data, train) for n in ("time_offset", "external_field"))
+        if b is not None
+    ]
+    monkeypatch.setattr(effects, "ATTITUDE_BEAM", beam)
+    block = _design_attitude(data, train, fixed=fixed)
+    assert block is not None
+    found = _periods(block)
+    close = np.allclose(found, INJECTED_PERIODS_S, rtol=0.01)
+    assert close == (beam > 1), found

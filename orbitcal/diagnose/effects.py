@@ -823,6 +823,11 @@ ATTITUDE_MAX_TERMS = 3
 #: At most this many passes of the cyclic period refinement (it stops at the first pass that
 #: changes no period).
 ATTITUDE_REFINE_PASSES = 8
+#: Sets of periods carried from one greedy step of the scan to the next (beam search).
+ATTITUDE_BEAM = 3
+
+#: The rows of the scan's orthonormal basis are kept between its uses up to this size [B].
+SCAN_Q_CACHE_BYTES = 16 * 2**20
 
 #: Samples per block of the batched period scan (memory ~ periods x block x 8 B per array).
 SCAN_BLOCK_SAMPLES = 4096
@@ -874,37 +879,77 @@ def _design_attitude(
             return floor, 0.0
         return float(g[i]), float(periods_s[i])
 
+    def peaks(periods_s: FloatArray, g: FloatArray, n: int) -> list[float]:
+        # the ``n`` largest local maxima of the gain over the grid, at least 5 % apart
+        order = np.argsort(-g, kind="stable")
+        out: list[float] = []
+        for i in order:
+            if len(out) == n or not g[i] > 0.0:
+                break
+            p = float(periods_s[i])
+            left = g[i - 1] if i > 0 else -np.inf
+            right = g[i + 1] if i + 1 < g.size else -np.inf
+            if g[i] >= left and g[i] >= right and all(abs(p / q - 1.0) >= 0.05 for q in out):
+                out.append(p)
+        return out
+
+    def refine(chosen: list[float], passes: int) -> tuple[list[float], float]:
+        # Cyclic refinement: re-fit each period with the others fixed (close periods that one
+        # training span cannot resolve at once are separated this way), until a pass changes
+        # none; returns the periods and their training residual sum of squares.
+        chosen = list(chosen)
+        for _ in range(passes):
+            before = list(chosen)
+            for j in range(len(chosen)):
+                basis = scan.basis(chosen[:j] + chosen[j + 1 :])
+                r_now = scan.residual(basis)
+                grid = chosen[j] * np.linspace(0.94, 1.06, 61)
+                _, p_best = first_best(grid, scan.gains(grid, r_now, basis), -1.0)
+                chosen[j] = p_best if p_best else chosen[j]
+            if chosen == before:
+                break
+        r_end = scan.residual(scan.basis(chosen))
+        return chosen, float(r_end @ r_end)
+
+    # Beam search over the greedy steps: the best ``ATTITUDE_BEAM`` sets of periods are carried
+    # from step to step (each extended by the best peaks of its gain curve), so that a first
+    # period that a greedy scan would take from a mixture of several sinusoids cannot lock the
+    # others out; the set with the smallest training residual after refinement wins.
+    beams: list[tuple[float, list[float]]] = [(0.0, [])]
     for _ in range(ATTITUDE_MAX_TERMS):
-        basis = scan.basis(chosen)
-        r_now = scan.residual(basis)
-        free = np.array(
-            [not any(abs(float(p) / c - 1.0) < 0.05 for c in chosen) for p in periods], bool
-        )
-        best_gain, best_period = first_best(
-            periods[free], scan.gains(periods[free], r_now, basis), 0.0
-        )
-        if best_gain <= 0.0:
-            break
-        # Refine the period on a fine grid (+-2.5 %): phase errors grow over the held-out span.
-        fine = best_period * np.linspace(0.975, 1.025, 51)
-        g_fine, p_fine = first_best(fine, scan.gains(fine, r_now, basis), best_gain)
-        if p_fine:
-            best_gain, best_period = g_fine, p_fine
-        chosen.append(best_period)
-    if not chosen:
-        return None
-    # Cyclic refinement: re-fit each period with the others fixed (close periods that one
-    # training span cannot resolve at once are separated this way), until a pass changes none.
-    for _ in range(ATTITUDE_REFINE_PASSES):
-        before = list(chosen)
-        for j in range(len(chosen)):
-            basis = scan.basis(chosen[:j] + chosen[j + 1 :])
+        grown: list[tuple[float, list[float]]] = []
+        for _score, chosen in beams:
+            basis = scan.basis(chosen)
             r_now = scan.residual(basis)
-            grid = chosen[j] * np.linspace(0.94, 1.06, 61)
-            _, p_best = first_best(grid, scan.gains(grid, r_now, basis), -1.0)
-            chosen[j] = p_best if p_best else chosen[j]
-        if chosen == before:
+            rss_now = float(r_now @ r_now)
+            free = np.array(
+                [not any(abs(float(p) / c - 1.0) < 0.05 for c in chosen) for p in periods], bool
+            )
+            for start in peaks(
+                periods[free], scan.gains(periods[free], r_now, basis), ATTITUDE_BEAM
+            ):
+                # Refine the period on a fine grid (+-2.5 %): phase errors grow over the
+                # held-out span.
+                fine = start * np.linspace(0.975, 1.025, 51)
+                g_fine = scan.gains(fine, r_now, basis)
+                i = int(np.argmax(g_fine))
+                period, gain = float(fine[i]), float(g_fine[i])
+                key = sorted([*chosen, period])
+                if any(
+                    all(abs(a / b - 1.0) < 0.01 for a, b in zip(key, sorted(c), strict=True))
+                    for _, c in grown
+                ):
+                    continue
+                grown.append((rss_now - gain, [*chosen, period]))
+        if not grown:
             break
+        grown.sort(key=lambda t: t[0])
+        beams = grown[:ATTITUDE_BEAM]
+    if not beams[0][1]:
+        return None
+    # one refinement pass for every set, then the best set refined to convergence
+    first = [refine(chosen, 1) for _, chosen in beams]
+    chosen = refine(min(first, key=lambda t: t[1])[0], ATTITUDE_REFINE_PASSES - 1)[0]
     names = [
         f"dtheta_{axis}_{fname}_{period:.0f}s_mrad"
         for period in chosen
@@ -967,6 +1012,21 @@ class _AttitudeScan:
         self.t = data.t_utc_s[self.idx] - float(data.t_utc_s[self.idx[0]])
         self.y = data.b_raw_nt[self.idx].reshape(-1)
         self.n = int(self.idx.size)
+        # Per block, what no period changes: the rotation columns, their products R^T R and the
+        # columns of the calibration and of ``fixed`` (at most SCAN_MAX_SAMPLES samples:
+        # ~1.5 MB each for the first two, 0.5 MB per column for the last).
+        self._q_of: FloatArray | None = None
+        self._q: dict[int, FloatArray] = {}
+        self._rot = [_rotation_columns(data, self.idx[a0:a1]) * 1e-3 for a0, a1 in self.blocks()]
+        self._rtr = [np.matmul(np.swapaxes(r, 1, 2), r).reshape(-1, 9) for r in self._rot]
+        self._base = [
+            np.concatenate(
+                [data.calibration_rows(self.idx[a0:a1])]
+                + [bl.rows(self.idx[a0:a1]).reshape(-1, bl.width) for bl in self.fixed],
+                axis=1,
+            )
+            for a0, a1 in self.blocks()
+        ]
 
     def blocks(self) -> list[tuple[int, int]]:
         return [
@@ -975,13 +1035,11 @@ class _AttitudeScan:
 
     def rot(self, a0: int, a1: int) -> FloatArray:
         """Rotation columns per mrad of the block, (m, 3, 3)."""
-        return _rotation_columns(self.data, self.idx[a0:a1]) * 1e-3
+        return self._rot[a0 // SCAN_BLOCK_SAMPLES]
 
     def columns(self, periods: Sequence[float], a0: int, a1: int) -> FloatArray:
         """The columns X of the block, (3 m, 12 + fixed + 6 len(periods))."""
-        idx = self.idx[a0:a1]
-        parts = [self.data.calibration_rows(idx)]
-        parts += [bl.rows(idx).reshape(-1, bl.width) for bl in self.fixed]
+        parts = [self._base[a0 // SCAN_BLOCK_SAMPLES]]
         if periods:
             rt, tt = self.rot(a0, a1), self.t[a0:a1]
             for period in periods:
@@ -1005,7 +1063,16 @@ class _AttitudeScan:
         return tuple(periods), np.asarray(vt[keep].T / s[keep])
 
     def q_rows(self, basis: tuple[tuple[float, ...], FloatArray], a0: int, a1: int) -> FloatArray:
-        return np.asarray(self.columns(basis[0], a0, a1) @ basis[1])
+        """Rows of ``Q`` of the block; those of the latest basis are kept when they are small
+        (its residual and gains read them three times)."""
+        if self._q_of is not basis[1]:
+            self._q_of, self._q = basis[1], {}
+        q = self._q.get(a0)
+        if q is None:
+            q = np.asarray(self.columns(basis[0], a0, a1) @ basis[1])
+            if 3 * self.n * basis[1].shape[1] * 8 <= SCAN_Q_CACHE_BYTES:
+                self._q[a0] = q
+        return q
 
     def residual(self, basis: tuple[tuple[float, ...], FloatArray]) -> FloatArray:
         """``y - Q Q^T y`` over the training rows, (3 n,)."""
@@ -1035,7 +1102,7 @@ class _AttitudeScan:
             m = a1 - a0
             rt = self.rot(a0, a1)
             q3 = self.q_rows(basis, a0, a1).reshape(m, 3, n_q)
-            m_blk = np.matmul(np.swapaxes(rt, 1, 2), rt).reshape(m, 9)
+            m_blk = self._rtr[a0 // SCAN_BLOCK_SAMPLES]
             k_blk = q3[:, 0, :, None] * rt[:, 0, None, :]  # K = Q^T R per sample
             for i in (1, 2):
                 k_blk += q3[:, i, :, None] * rt[:, i, None, :]
