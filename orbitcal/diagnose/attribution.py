@@ -1143,7 +1143,8 @@ class Selection:
         # A member whose design is a scan of the residual (the attitude periods) is scanned again
         # beside its partner: alone it took its periods from a residual the partner's field
         # still fills.
-        pairs = [self._pair_beside(fixed, a, b) for a, b in pairs]
+        rss_before = float(np.sum(r_before[self.train] ** 2))
+        pairs = [self._pair_beside(fixed, a, b, rss_before) for a, b in pairs]
         self._screen_huber_weights(r_before)
         rms_screen = self._screen_pairs(fixed, [(a.block, b.block) for a, b in pairs])
         screened = sorted(
@@ -1175,13 +1176,23 @@ class Selection:
         return None if best is None else (best[1], best[2])
 
     def _pair_beside(
-        self, fixed: Sequence[DesignBlock], a: Candidate, b: Candidate
+        self, fixed: Sequence[DesignBlock], a: Candidate, b: Candidate, rss_before: float
     ) -> tuple[Candidate, Candidate]:
         """The pair with a member of ``RESIDUAL_SCANNED`` designed beside ``fixed`` and the other
-        member (its single fit and test kept: the pair's own tests judge it)."""
+        member (its single fit and test kept: the pair's own tests judge it).
+
+        Only beside a partner whose own fit takes ``min_gain`` of the training residual sum of
+        squares ``rss_before`` at least: a partner whose field is not in the residual leaves the
+        scan where it was (on a noise-level day at 1 Hz, ten scans for nothing).
+        """
         out = [a, b]
         for k, (c, other) in enumerate(((a, b), (b, a))):
-            if c.name in RESIDUAL_SCANNED and other.name not in RESIDUAL_SCANNED:
+            rss_other = float(np.sum(other.residual_nt[self.train] ** 2))
+            if (
+                c.name in RESIDUAL_SCANNED
+                and other.name not in RESIDUAL_SCANNED
+                and rss_other < (1.0 - self.min_gain) * rss_before
+            ):
                 again = self.design_beside(c.name, [*fixed, other.block])
                 if again is not c.block:
                     out[k] = dataclasses.replace(c, design=again)

@@ -833,9 +833,9 @@ SCAN_Q_CACHE_BYTES = 16 * 2**20
 SCAN_BLOCK_SAMPLES = 4096
 
 #: At most this many training samples enter the period scan (every k-th): the shortest period
-#: scanned (1,200 s) then still has hundreds of samples per cycle on a day at 1 Hz, and the scan
-#: costs the same beyond. The regressors of the periods found use every sample.
-SCAN_MAX_SAMPLES = 20_000
+#: scanned (1,200 s) then still has ~100 samples per cycle on a day at 1 Hz, and the scan costs
+#: the same beyond. The regressors of the periods found use every sample.
+SCAN_MAX_SAMPLES = 5_000
 
 
 def _rotation_columns(data: DiagnosisData, index: Index | None = None) -> FloatArray:
