@@ -94,6 +94,28 @@ def test_currents_that_change_from_crossing_to_crossing_are_found_beside_others(
     assert out["spurious"] == [], out
 
 
+def test_other_effects_are_judged_on_quiet_latitudes_when_currents_are_found(
+    real_tles_text: str,
+) -> None:
+    """Doubled auroral currents (110 nT held-out RMS) beside a Sun-driven field and a bias step
+    (tumbling, polar): the currents' held-out part, different at every crossing, swamped both
+    smaller effects' held-out tests and only the currents were named (110 -> 110 nT). Once the
+    regional test finds the currents in the calibration's residual, the others are fitted and
+    judged on |magnetic latitude| < 50 deg: all three are found, the quiet held-out residual at
+    the noise floor."""
+    case = CompoundCase(
+        23,
+        ("sun_driven", "parameter_drift", "field_aligned_currents"),
+        (1.0, 1.0, 2.0),
+        "tumbling",
+        39452,
+        1434216453,
+    )
+    out = run_compound_case(case, tle_text=real_tles_text)
+    _found_exactly(out, set(case.effects))
+    assert out["final_holdout_rms_nt"] < 1.2 * out["perfect_holdout_rms_nt"]
+
+
 def test_an_effect_out_of_range_alone_enters_a_pair_inside_it(real_tles_text: str) -> None:
     """A bias step, a thermal offset and auroral currents (tumbling): beside the currents the
     drift alone needs 165 nT/day (implausible) and the temperature alone is not significant

@@ -1401,6 +1401,26 @@ def attribute(
         )
     base = fit_joint(data, train, (), robust=robust)
     r_base = data.b_raw_nt - base.predict_nt(data)
+    report_train, report_holdout = train, holdout
+    quiet_only = False
+    if any(e.name == "field_aligned_currents" for e in candidates):
+        # Auroral currents that the regional test finds in the calibration's residual change from
+        # crossing to crossing: no model predicts their held-out part, which then swamps every
+        # other effect's held-out test. The other effects are fitted and judged on quiet
+        # magnetic latitudes only (as Swarm processing does); the currents are named by the
+        # regional test on what the selected model leaves.
+        pre = _regional_fac(data, r_base, train, holdout, [])
+        quiet = np.abs(data.mlat_deg) < QUIET_MLAT_DEG
+        if (
+            pre is not None
+            and pre.significant
+            and int((train & quiet).sum()) >= 30
+            and int((holdout & quiet).sum()) >= 3 * n_chunks
+        ):
+            train, holdout = train & quiet, holdout & quiet
+            quiet_only = True
+            base = fit_joint(data, train, (), robust=robust)
+            r_base = data.b_raw_nt - base.predict_nt(data)
     base_rms = norm_rms_nt(r_base[holdout])
 
     designs: dict[str, DesignBlock] = {}
@@ -1525,6 +1545,11 @@ def attribute(
             confidence = None  # judged by a split fit, not by the held-out chunks
     # What the selected effects leave (e.g. a storm's auroral part once the ring current is in).
     regional = _regional_fac(data, current_r, train, holdout, selected)
+    if regional is not None and quiet_only:
+        regional.params["others_judged_on"] = (
+            f"|magnetic latitude| < {QUIET_MLAT_DEG:.0f} deg: the currents found in the "
+            "calibration's residual would swamp every other effect's held-out test"
+        )
     if regional is not None and regional.significant:
         effects = [e for e in effects if e.name != regional.name]
         effects.insert(len(step_scores), regional)
@@ -1539,8 +1564,8 @@ def attribute(
         effects=effects,
         selected=selected,
         final_rms_nt=current_rms,
-        train=train,
-        holdout=holdout,
+        train=report_train,
+        holdout=report_holdout,
         baseline_residual_nt=r_base,
         final_residual_nt=current_r,
         split_fits=splits,
