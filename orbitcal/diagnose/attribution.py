@@ -1417,6 +1417,7 @@ def attribute(
             and int((train & quiet).sum()) >= 30
             and int((holdout & quiet).sum()) >= 3 * n_chunks
         ):
+            report_fit = (base, r_base)
             train, holdout = train & quiet, holdout & quiet
             quiet_only = True
             base = fit_joint(data, train, (), robust=robust)
@@ -1556,10 +1557,24 @@ def attribute(
         if not selected:
             confidence = None
         selected.append(regional.name)
+    if quiet_only:
+        # The report's baseline and final model on every sample: the calibration fitted on all
+        # training samples, and the selected effects with the currents' model fitted jointly.
+        base, r_base = report_fit
+        base_rms = norm_rms_nt(r_base[report_holdout])
+        final_blocks = list(chosen_blocks)
+        if regional is not None and regional.significant:
+            fac = next(e for e in candidates if e.name == "field_aligned_currents")
+            block = fac.design(data, report_train)
+            if block is not None and block.all_finite():
+                final_blocks.append(block)
+        current_fit = fit_joint(data, report_train, final_blocks, robust=robust)
+        current_r = data.b_raw_nt - current_fit.predict_nt(data)
+        current_rms = norm_rms_nt(current_r[report_holdout])
     splits = split_fit_tests(data, robust=robust) if split_tests else []
     return Attribution(
         baseline_rms_nt=base_rms,
-        baseline_train_rms_nt=norm_rms_nt(r_base[train]),
+        baseline_train_rms_nt=norm_rms_nt(r_base[report_train]),
         verdict=selected[0] if selected else "none",
         effects=effects,
         selected=selected,
