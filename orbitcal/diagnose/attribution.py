@@ -1093,7 +1093,9 @@ class Selection:
         """For each selected effect with a :data:`NEAR_TWINS` partner not selected: the partner,
         if the final model with the effect replaced by the partner's simplest form (beside the
         same other effects) is not worse on the held-out blocks (within ``TIE_MAX_GAP`` and not
-        significantly by the chunk test)."""
+        significantly by the chunk test), or if the partner could hide beside the effect
+        (:meth:`_inseparable`: both present, a time-tag error absorbs an along-track orbit error
+        but for the Earth's rotation)."""
         names = {c.name for c in chosen}
         out: dict[str, str] = {}
         full: tuple[FloatArray, float] | None = None
@@ -1107,13 +1109,39 @@ class Selection:
             base = self.designs[partner]
             simple = DesignBlock(base.source, base.names, base.variant)
             others = [x.block for x in chosen if x is not c]
-            _, r, rms = self.fit([*others, simple])
-            if not rms <= full[1] * (1.0 + TIE_MAX_GAP):
-                continue
+            rep, r, rms = self.fit([*others, simple])
             hold = self.holdout
-            if _chunk_test(r[hold], full[0][hold], self.n_chunks)[0] >= self.alpha:
+            if (
+                rms <= full[1] * (1.0 + TIE_MAX_GAP)
+                and _chunk_test(r[hold], full[0][hold], self.n_chunks)[0] >= self.alpha
+            ):
+                out[c.name] = partner
+                continue
+            if self._inseparable(others, c, rep):
                 out[c.name] = partner
         return out
+
+    def _inseparable(
+        self,
+        others: Sequence[DesignBlock],
+        c: Candidate,
+        rep: JointFit,
+    ) -> bool:
+        """Whether the partner's simplest form could hide beside the selected effect ``c``: at the
+        amount that stands in for ``c`` alone (``rep``), the part of its field that the
+        calibration, ``c`` and the other effects cannot take (least squares on the training
+        samples) would change the held-out RMS by less than ``min_gain``; the data then cannot
+        say whether the shift along the track is ``c``'s, the partner's or both."""
+        k = len(rep.blocks) - 1
+        field = rep.blocks[k].rows(np.arange(self.data.n)) @ rep.coef[k]
+        probe = dataclasses.replace(self.data, b_raw_nt=self.data.b_ref_body_nt + field)
+        fit = fit_joint(
+            probe, self.train, [*others, c.block], robust=False, bounded=False, use_prior=False
+        )
+        orth = probe.b_raw_nt - fit.predict_nt(probe)
+        _, r_full, rms_full = self.fit([*others, c.block])
+        rms_with = norm_rms_nt((r_full + orth)[self.holdout])
+        return bool(rms_with < rms_full * (1.0 + self.min_gain))
 
     def pair(
         self,
