@@ -1117,7 +1117,7 @@ class Selection:
             ):
                 out[c.name] = partner
                 continue
-            if self._inseparable(others, c, rep):
+            if self._inseparable(others, c, rep, full):
                 out[c.name] = partner
         return out
 
@@ -1126,12 +1126,14 @@ class Selection:
         others: Sequence[DesignBlock],
         c: Candidate,
         rep: JointFit,
+        full: tuple[FloatArray, float],
     ) -> bool:
         """Whether the partner's simplest form could hide beside the selected effect ``c``: at the
         amount that stands in for ``c`` alone (``rep``), the part of its field that the
         calibration, ``c`` and the other effects cannot take (least squares on the training
         samples) would change the held-out RMS by less than ``min_gain``; the data then cannot
-        say whether the shift along the track is ``c``'s, the partner's or both."""
+        say whether the shift along the track is ``c``'s, the partner's or both. ``full`` is the
+        residual and held-out RMS of the selected model."""
         k = len(rep.blocks) - 1
         field = rep.blocks[k].rows(np.arange(self.data.n)) @ rep.coef[k]
         probe = dataclasses.replace(self.data, b_raw_nt=self.data.b_ref_body_nt + field)
@@ -1139,7 +1141,7 @@ class Selection:
             probe, self.train, [*others, c.block], robust=False, bounded=False, use_prior=False
         )
         orth = probe.b_raw_nt - fit.predict_nt(probe)
-        _, r_full, rms_full = self.fit([*others, c.block])
+        r_full, rms_full = full  # the selected model (``others`` and ``c``)
         rms_with = norm_rms_nt((r_full + orth)[self.holdout])
         return bool(rms_with < rms_full * (1.0 + self.min_gain))
 
