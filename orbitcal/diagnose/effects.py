@@ -860,7 +860,6 @@ def _design_attitude(
     if periods.size == 0:
         return None
     scan = _AttitudeScan(data, train, fixed)
-    chosen: list[float] = []
     # The scan needs, per period, only 6 x 6 and 6 x q sums over the samples: the gain of the
     # projected columns P[R c, R s] (P = I - QQ^T, R = rotation columns, c, s = cos, sin) is
     # g^T (G + eps tr(G) I)^-1 g with G = A - B^T B, A = [[sum c^2 M, sum cs M], [., sum s^2 M]],
