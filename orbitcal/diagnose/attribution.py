@@ -1174,7 +1174,12 @@ class Selection:
         # beside its partner: alone it took its periods from a residual the partner's field
         # still fills.
         rss_before = float(np.sum(r_before[self.train] ** 2))
-        pairs = [self._pair_beside(fixed, a, b, rss_before) for a, b in pairs]
+        in_residual = {
+            c.name
+            for c in options
+            if float(np.sum(c.residual_nt[self.train] ** 2)) < (1.0 - self.min_gain) * rss_before
+        }
+        pairs = [self._pair_beside(fixed, a, b, in_residual) for a, b in pairs]
         self._screen_huber_weights(r_before)
         rms_screen = self._screen_pairs(fixed, [(a.block, b.block) for a, b in pairs])
         screened = sorted(
@@ -1206,22 +1211,21 @@ class Selection:
         return None if best is None else (best[1], best[2])
 
     def _pair_beside(
-        self, fixed: Sequence[DesignBlock], a: Candidate, b: Candidate, rss_before: float
+        self, fixed: Sequence[DesignBlock], a: Candidate, b: Candidate, in_residual: set[str]
     ) -> tuple[Candidate, Candidate]:
         """The pair with a member of ``RESIDUAL_SCANNED`` designed beside ``fixed`` and the other
         member (its single fit and test kept: the pair's own tests judge it).
 
-        Only beside a partner whose own fit takes ``min_gain`` of the training residual sum of
-        squares ``rss_before`` at least: a partner whose field is not in the residual leaves the
-        scan where it was (on a noise-level day at 1 Hz, ten scans for nothing).
+        Only beside a partner in ``in_residual`` (its own fit takes ``min_gain`` of the training
+        residual sum of squares at least): a partner whose field is not in the residual leaves
+        the scan where it was (on a noise-level day at 1 Hz, ten scans for nothing).
         """
         out = [a, b]
         for k, (c, other) in enumerate(((a, b), (b, a))):
-            rss_other = float(np.sum(other.residual_nt[self.train] ** 2))
             if (
                 c.name in RESIDUAL_SCANNED
                 and other.name not in RESIDUAL_SCANNED
-                and rss_other < (1.0 - self.min_gain) * rss_before
+                and other.name in in_residual
             ):
                 again = self.design_beside(c.name, [*fixed, other.block])
                 if again is not c.block:
@@ -1439,7 +1443,7 @@ def attribute(
         # other effect's held-out test. The other effects are fitted and judged on quiet
         # magnetic latitudes only (as Swarm processing does); the currents are named by the
         # regional test on what the selected model leaves.
-        pre = _regional_fac(data, r_base, train, holdout, [])
+        pre = _regional_fac(data, r_base, [])
         quiet = np.abs(data.mlat_deg) < QUIET_MLAT_DEG
         if (
             pre is not None
@@ -1575,7 +1579,7 @@ def attribute(
             effects = [absorbed] + [e for e in effects if e.name != absorbed.name]
             confidence = None  # judged by a split fit, not by the held-out chunks
     # What the selected effects leave (e.g. a storm's auroral part once the ring current is in).
-    regional = _regional_fac(data, current_r, train, holdout, selected)
+    regional = _regional_fac(data, current_r, selected)
     if regional is not None and quiet_only:
         regional.params["others_judged_on"] = (
             f"|magnetic latitude| < {QUIET_MLAT_DEG:.0f} deg: the currents found in the "
@@ -1847,11 +1851,7 @@ FAC_CV_RIDGE = 1e-3
 
 
 def _regional_fac(
-    data: DiagnosisData,
-    r_now: FloatArray,
-    train: BoolArray,
-    holdout: BoolArray,
-    selected: Sequence[str],
+    data: DiagnosisData, r_now: FloatArray, selected: Sequence[str]
 ) -> EffectScore | None:
     """Field-aligned currents when the held-out test cannot judge them.
 
@@ -1872,7 +1872,7 @@ def _regional_fac(
     lo = amlat < QUIET_MLAT_DEG
     if int(hi.sum()) < 30 or int(lo.sum()) < 30:
         return None
-    from orbitcal.diagnose.effects import FAC_CENTRES_DEG, FAC_WIDTH_DEG
+    from orbitcal.diagnose.effects import FAC_CENTRES_DEG, _fac_bumps
 
     # Both directions perpendicular to B, latitude bumps as the catalogue model, fitted to each
     # leg of each crossing on its own (poleward or equatorward of its highest latitude): the
@@ -1890,25 +1890,15 @@ def _regional_fac(
     par_hi = float(np.sqrt(np.mean(par[hi] ** 2)))
     pred = np.zeros((data.n, 3))
     for leg in _fac_legs(data.t_utc_s, amlat, idx):
-        mlat_leg = data.mlat_deg[leg]
-        bumps = [
-            bump
-            for c in FAC_CENTRES_DEG
-            if float(
-                np.max(
-                    bump := np.exp(-0.5 * ((np.abs(mlat_leg) - c) / FAC_WIDTH_DEG) ** 2),
-                    initial=0.0,
-                )
-            )
-            >= 0.05
-        ]
-        if not bumps:
+        bumps = _fac_bumps(amlat[leg], 1.0, FAC_CENTRES_DEG)
+        bumps = bumps[:, bumps.max(axis=0) >= 0.05]
+        if bumps.shape[1] == 0:
             continue
         transverse = data.transverse_body[leg]
-        g = np.empty((leg.size, 3, 2 * len(bumps)))
-        for j, bump in enumerate(bumps):
+        g = np.empty((leg.size, 3, 2 * bumps.shape[1]))
+        for j in range(bumps.shape[1]):
             for k in range(2):
-                np.multiply(transverse[:, k, :], bump[:, None], out=g[:, :, 2 * j + k])
+                np.multiply(transverse[:, k, :], bumps[:, j, None], out=g[:, :, 2 * j + k])
         chunk = ((data.t_utc_s[leg] - data.t_utc_s[leg[0]]) // FAC_CV_CHUNK_S).astype(int)
         fold = chunk % FAC_CV_FOLDS
         r_leg = r_now[leg]

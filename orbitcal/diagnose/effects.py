@@ -1013,7 +1013,7 @@ class _AttitudeScan:
         self.n = int(self.idx.size)
         # Per block, what no period changes: the rotation columns, their products R^T R and the
         # columns of the calibration and of ``fixed`` (at most SCAN_MAX_SAMPLES samples:
-        # ~1.5 MB each for the first two, 0.5 MB per column for the last).
+        # ~0.4 MB each for the first two, 0.1 MB per column for the last).
         self._q_of: FloatArray | None = None
         self._q: dict[int, FloatArray] = {}
         self._rot = [_rotation_columns(data, self.idx[a0:a1]) * 1e-3 for a0, a1 in self.blocks()]
