@@ -871,6 +871,9 @@ RESIDUAL_SCANNED: tuple[str, ...] = ("attitude_error",)
 #: chunk test cannot tell worse than it are tied too (the training BIC decides among them) [-].
 TIE_MAX_GAP = 0.10
 
+#: The best screened pairs beside which :meth:`Selection.triple` scans an attitude error again.
+TRIPLE_PAIRS = 3
+
 
 @dataclass
 class Selection:
@@ -1194,9 +1197,14 @@ class Selection:
             if best is not None and approx > best[0] * (1.0 + PAIR_SCREEN_MARGIN):
                 break
             fit, r, rms = self.fit([*fixed, a.block, b.block])
-            if not self.gains(rms, rms_before) or fit.at_bounds(len(fit.blocks) - 1):
-                continue
-            if fit.at_bounds(len(fit.blocks) - 2):
+            if fit.at_bounds(len(fit.blocks) - 2) or fit.at_bounds(len(fit.blocks) - 1):
+                # Each member's variant was chosen alone, with the partner's field in the
+                # residual: beside the partner another variant may fit inside its range.
+                again = self._resolved(fixed, [a, b])
+                if again is None:
+                    continue
+                (a, b), fit, r, rms = again
+            if not self.gains(rms, rms_before):
                 continue
             if _chunk_test(r_before[self.holdout], r[self.holdout], self.n_chunks)[0] >= level:
                 continue
@@ -1209,6 +1217,101 @@ class Selection:
             if ok and (best is None or rms < best[0]):
                 best = (rms, a, b)
         return None if best is None else (best[1], best[2])
+
+    def _resolved(
+        self, fixed: Sequence[DesignBlock], members: Sequence[Candidate]
+    ) -> tuple[list[Candidate], JointFit, FloatArray, float] | None:
+        """The members with each one's variant chosen again (training BIC) beside the others,
+        and their joint fit; ``None`` when no variant changes or the fit still reaches a bound."""
+        out = list(members)
+        for k, c in enumerate(members):
+            base = self.designs[c.name]
+            if not base.alternatives:
+                continue
+            beside = [m.block for j, m in enumerate(members) if j != k]
+            chosen = _resolve(self.data, self.train, [*fixed, *beside], base)
+            if chosen is not c.block:
+                out[k] = dataclasses.replace(c, design=chosen)
+        if all(o is m for o, m in zip(out, members, strict=True)):
+            return None
+        fit, r, rms = self.fit([*fixed, *(c.block for c in out)])
+        if any(fit.at_bounds(len(fit.blocks) - 1 - k) for k in range(len(out))):
+            return None
+        return out, fit, r, rms
+
+    def triple(
+        self,
+        fixed: Sequence[DesignBlock],
+        options: Sequence[Candidate],
+        r_before: FloatArray,
+        rms_before: float,
+    ) -> tuple[Candidate, Candidate, Candidate] | None:
+        """Two effects and an effect of ``RESIDUAL_SCANNED`` scanned beside them, when no single
+        effect and no pair passes.
+
+        An attitude error's periods scanned on a residual that two other effects still fill are
+        wrong, and beside it those two leave their ranges (a nonlinearity's cross-track terms,
+        ill-determined in a nadir attitude, take up the attitude error's field), so no pair
+        passes. The pairs of the other candidates whose own fits take ``min_gain`` of the
+        training residual are screened (:meth:`_screen_pairs`); beside each of the
+        ``TRIPLE_PAIRS`` best the scan runs again. A triple passes when it shrinks the held-out
+        residual significantly (Bonferroni over every pair that could have been screened, times
+        the scanned effects) and each member does so on top of the other two, all inside their
+        ranges. The triple with the lowest held-out RMS is returned.
+        """
+        from itertools import combinations
+
+        scanned = [n for n in RESIDUAL_SCANNED if n in self.designs and n in self.effects]
+        rss_before = float(np.sum(r_before[self.train] ** 2))
+        others = sorted(
+            (
+                c
+                for c in options
+                if c.name not in RESIDUAL_SCANNED
+                and float(np.sum(c.residual_nt[self.train] ** 2))
+                < (1.0 - self.min_gain) * rss_before
+            ),
+            key=lambda c: c.holdout_rms_nt,
+        )
+        pairs = list(combinations(others, 2))
+        if not scanned or not pairs:
+            return None
+        level = self.alpha / (len(pairs) * len(scanned))
+        self._screen_huber_weights(r_before)
+        rms_screen = self._screen_pairs(fixed, [(a.block, b.block) for a, b in pairs])
+        ranked = sorted(zip(rms_screen, pairs, strict=True), key=lambda t: t[0])
+        best: tuple[float, list[Candidate]] | None = None
+        for approx, (a, b) in ranked[:TRIPLE_PAIRS]:
+            if approx >= rms_before:
+                break
+            for name in scanned:
+                block = self.design_beside(name, [*fixed, a.block, b.block])
+                fit, r, rms = self.fit([*fixed, a.block, b.block, block])
+                s = Candidate(name, fit, r, rms, design=block)
+                members = [a, b, s]
+                if any(fit.at_bounds(len(fit.blocks) - 1 - k) for k in range(3)):
+                    again = self._resolved(fixed, members)
+                    if again is None:
+                        continue
+                    members, fit, r, rms = again
+                if not self.gains(rms, rms_before):
+                    continue
+                if _chunk_test(r_before[self.holdout], r[self.holdout], self.n_chunks)[0] >= level:
+                    continue
+                ok = True
+                for k in range(3):
+                    rest = [m.block for j, m in enumerate(members) if j != k]
+                    _, r_k, rms_k = self.fit([*fixed, *rest])
+                    p, gains = self.judge(fit, r, r_k, rms, rms_k, k=len(fixed) + k)
+                    if not (p < level and gains):
+                        ok = False
+                        break
+                if ok and (best is None or rms < best[0]):
+                    best = (rms, members)
+        if best is None:
+            return None
+        a, b, s = best[1]
+        return a, b, s
 
     def _pair_beside(
         self, fixed: Sequence[DesignBlock], a: Candidate, b: Candidate, in_residual: set[str]
@@ -1753,14 +1856,17 @@ def _forward(
             # Implausible ones too: a candidate whose fit leaves its range while the other
             # member's field is in the residual may fit inside it beside that member (the pair
             # passes only with both inside their ranges).
-            pair = (
+            group: Sequence[Candidate] | None = (
                 sel.pair(blocks, tried, current_r, current_rms)
                 if len(chosen) + 2 <= max_steps
                 else None
             )
-            if pair is None:
+            if group is None and len(chosen) + 3 <= max_steps:
+                # nor a pair: two effects with an attitude error scanned beside them
+                group = sel.triple(blocks, tried, current_r, current_rms)
+            if group is None:
                 break
-            new = list(pair)
+            new = list(group)
         chosen.extend(new)
         blocks.extend(c.block for c in new)
         current_fit, current_r, current_rms = sel.fit(blocks)

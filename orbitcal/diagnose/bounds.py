@@ -108,8 +108,8 @@ PARAM_RANGES: tuple[tuple[str, ParamRange], ...] = (
     ("sunlit_offset_", _sym(500.0, "stray field of solar-array currents, <= 500 nT")),
     ("sun_", _sym(500.0, "stray field of solar-array currents, <= 500 nT")),
     # sensor nonlinearity at 5e4 nT
-    ("quadratic_", _sym(500.0, "nonlinearity <= 1 % of 5e4 nT")),
-    ("cubic_", _sym(500.0, "nonlinearity <= 1 % of 5e4 nT")),
+    ("quadratic_", ParamRange(-500.0, 500.0, "nonlinearity <= 1 % of 5e4 nT", 0.0, 250.0)),
+    ("cubic_", ParamRange(-500.0, 500.0, "nonlinearity <= 1 % of 5e4 nT", 0.0, 250.0)),
     # orbit error of an element set
     ("along_track_rate_km_per_day", _sym(50.0, "SGP4 along-track error growth <= 50 km/day")),
     ("along_track_km", _sym(100.0, "SGP4 along-track error <= 100 km")),
