@@ -445,6 +445,24 @@ def _resolve(
         any_finite = any_finite or bool(np.isfinite(bic))
         if bic < best_bic or (np.isnan(bic) and not np.isnan(best_bic)):
             best, best_bic = opt, bic
+    # The chosen form refined (a step time between two of the grid's): its nearby forms, the
+    # best kept, until none refines further. A nearby form of the same variant is the chosen one
+    # with a finer refinement (no refit).
+    while any_finite and best.refine is not None:
+        moved, stay = best, None
+        for opt in best.refine():
+            if opt.variant == best.variant:
+                stay = opt
+                continue
+            bic = _train_bic(data, train, [*fixed, opt], bounded=bounded)
+            if bic < best_bic:
+                moved, best_bic = opt, bic
+        if moved is not best:
+            best = moved
+        elif stay is not None:
+            best = stay
+        else:
+            break
     return best if any_finite else block
 
 
@@ -1197,46 +1215,103 @@ class Selection:
             if best is not None and approx > best[0] * (1.0 + PAIR_SCREEN_MARGIN):
                 break
             fit, r, rms = self.fit([*fixed, a.block, b.block])
-            if fit.at_bounds(len(fit.blocks) - 2) or fit.at_bounds(len(fit.blocks) - 1):
-                # Each member's variant was chosen alone, with the partner's field in the
-                # residual: beside the partner another variant may fit inside its range.
-                again = self._resolved(fixed, [a, b])
-                if again is None:
-                    continue
-                (a, b), fit, r, rms = again
-            if not self.gains(rms, rms_before):
-                continue
-            if _chunk_test(r_before[self.holdout], r[self.holdout], self.n_chunks)[0] >= level:
-                continue
-            # each on top of the other: a's own test compares b alone (b's residual) with both
-            tests = [
-                self.judge(fit, r, other.residual_nt, rms, other.holdout_rms_nt, k=k)
-                for k, other in ((-2, b), (-1, a))
-            ]
-            ok = all(p < level and gains for p, gains in tests)
+            ok = self._pair_passes(fit, r, rms, a, b, r_before, rms_before, level)
+            if not ok:
+                # Each member's form was chosen alone, with the partner's field in the residual
+                # (a step time, an attitude error's periods): chosen again beside each other.
+                again = self._beside_each_other(fixed, [a, b])
+                if again is not None:
+                    (a, b), fit, r, rms = again
+                    ok = self._group_passes(fixed, [a, b], fit, r, rms, r_before, rms_before, level)
             if ok and (best is None or rms < best[0]):
                 best = (rms, a, b)
         return None if best is None else (best[1], best[2])
 
-    def _resolved(
-        self, fixed: Sequence[DesignBlock], members: Sequence[Candidate]
+    def _pair_passes(
+        self,
+        fit: JointFit,
+        r: FloatArray,
+        rms: float,
+        a: Candidate,
+        b: Candidate,
+        r_before: FloatArray,
+        rms_before: float,
+        level: float,
+    ) -> bool:
+        """Whether the pair's joint fit passes: inside the ranges, a significant shrink, and
+        each member on top of the other (a's own test compares b alone, b's residual, with
+        both)."""
+        if fit.at_bounds(len(fit.blocks) - 2) or fit.at_bounds(len(fit.blocks) - 1):
+            return False
+        if not self.gains(rms, rms_before):
+            return False
+        if _chunk_test(r_before[self.holdout], r[self.holdout], self.n_chunks)[0] >= level:
+            return False
+        tests = [
+            self.judge(fit, r, other.residual_nt, rms, other.holdout_rms_nt, k=k)
+            for k, other in ((-2, b), (-1, a))
+        ]
+        return all(p < level and gains for p, gains in tests)
+
+    def _group_passes(
+        self,
+        fixed: Sequence[DesignBlock],
+        members: Sequence[Candidate],
+        fit: JointFit,
+        r: FloatArray,
+        rms: float,
+        r_before: FloatArray,
+        rms_before: float,
+        level: float,
+    ) -> bool:
+        """Whether effects fitted jointly after ``fixed`` pass as a group: inside their ranges,
+        a significant shrink of the held-out residual, and each member significant on top of
+        all the others (refitted without it)."""
+        n = len(members)
+        if any(fit.at_bounds(len(fit.blocks) - 1 - k) for k in range(n)):
+            return False
+        if not self.gains(rms, rms_before):
+            return False
+        if _chunk_test(r_before[self.holdout], r[self.holdout], self.n_chunks)[0] >= level:
+            return False
+        for k in range(n):
+            rest = [m.block for j, m in enumerate(members) if j != k]
+            _, r_k, rms_k = self.fit([*fixed, *rest])
+            p, gains = self.judge(fit, r, r_k, rms, rms_k, k=len(fixed) + k)
+            if not (p < level and gains):
+                return False
+        return True
+
+    def _beside_each_other(
+        self, fixed: Sequence[DesignBlock], members: Sequence[Candidate], rounds: int = 2
     ) -> tuple[list[Candidate], JointFit, FloatArray, float] | None:
-        """The members with each one's variant chosen again (training BIC) beside the others,
-        and their joint fit; ``None`` when no variant changes or the fit still reaches a bound."""
+        """The members with each one's form chosen again beside the others: the variant by
+        training BIC (:func:`_resolve`), an effect of ``RESIDUAL_SCANNED`` scanned again, in
+        turn, ``rounds`` times or until nothing changes; and their joint fit. ``None`` when no
+        form changes."""
         out = list(members)
-        for k, c in enumerate(members):
-            base = self.designs[c.name]
-            if not base.alternatives:
-                continue
-            beside = [m.block for j, m in enumerate(members) if j != k]
-            chosen = _resolve(self.data, self.train, [*fixed, *beside], base)
-            if chosen is not c.block:
-                out[k] = dataclasses.replace(c, design=chosen)
-        if all(o is m for o, m in zip(out, members, strict=True)):
+        changed = False
+        for _ in range(rounds):
+            moved = False
+            for k, c in enumerate(out):
+                beside = [m.block for j, m in enumerate(out) if j != k]
+                if c.name in RESIDUAL_SCANNED:
+                    chosen = self.design_beside(c.name, [*fixed, *beside])
+                elif self.designs[c.name].alternatives:
+                    chosen = _resolve(
+                        self.data, self.train, [*fixed, *beside], self.designs[c.name]
+                    )
+                else:
+                    continue
+                if chosen is not c.block and chosen.variant != c.block.variant:
+                    out[k] = dataclasses.replace(c, design=chosen)
+                    moved = True
+            if not moved:
+                break
+            changed = True
+        if not changed:
             return None
         fit, r, rms = self.fit([*fixed, *(c.block for c in out)])
-        if any(fit.at_bounds(len(fit.blocks) - 1 - k) for k in range(len(out))):
-            return None
         return out, fit, r, rms
 
     def triple(
@@ -1289,23 +1364,14 @@ class Selection:
                 fit, r, rms = self.fit([*fixed, a.block, b.block, block])
                 s = Candidate(name, fit, r, rms, design=block)
                 members = [a, b, s]
-                if any(fit.at_bounds(len(fit.blocks) - 1 - k) for k in range(3)):
-                    again = self._resolved(fixed, members)
-                    if again is None:
-                        continue
-                    members, fit, r, rms = again
-                if not self.gains(rms, rms_before):
-                    continue
-                if _chunk_test(r_before[self.holdout], r[self.holdout], self.n_chunks)[0] >= level:
-                    continue
-                ok = True
-                for k in range(3):
-                    rest = [m.block for j, m in enumerate(members) if j != k]
-                    _, r_k, rms_k = self.fit([*fixed, *rest])
-                    p, gains = self.judge(fit, r, r_k, rms, rms_k, k=len(fixed) + k)
-                    if not (p < level and gains):
-                        ok = False
-                        break
+                ok = self._group_passes(fixed, members, fit, r, rms, r_before, rms_before, level)
+                if not ok:
+                    again = self._beside_each_other(fixed, members)
+                    if again is not None:
+                        members, fit, r, rms = again
+                        ok = self._group_passes(
+                            fixed, members, fit, r, rms, r_before, rms_before, level
+                        )
                 if ok and (best is None or rms < best[0]):
                     best = (rms, members)
         if best is None:

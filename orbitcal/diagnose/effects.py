@@ -422,12 +422,16 @@ class DesignBlock:
     alternatives : sequence of DesignBlock
         Other forms of the same effect; the attribution keeps the one that fits the *training*
         blocks best (never the held-out ones).
+    refine : callable, optional
+        Forms near this one (a bias step a little earlier or later), tried when this one is
+        chosen among the alternatives; each may refine further.
     """
 
     source: FloatArray | Columns
     names: list[str]
     variant: str = ""
     alternatives: Sequence[DesignBlock] = ()
+    refine: Callable[[], Sequence[DesignBlock]] | None = field(default=None, compare=False)
 
     @property
     def n(self) -> int:
@@ -733,15 +737,44 @@ def _design_drift(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
         return best
     names = [n + "_step_nt" for n in names_b + names_s] + [n + "_nt_per_day" for n in names_b]
 
-    steps = []
-    for frac in np.linspace(0.1, 0.9, 17):
-        ts = float(t_train[0] + frac * span)
-        step = partial(_step_at, data.t_utc_s, ts)
-        kinds: list[Factor] = [step, partial(_scaled_by, b, step), tau]
-        steps.append(
-            DesignBlock(PerAxisColumns(data.n, kinds), names, variant=f"step@{ts:.0f}+trend")
-        )
+    fracs = np.linspace(0.1, 0.9, DRIFT_STEP_TIMES)
+    spacing_s = float(fracs[1] - fracs[0]) * span
+    steps = [
+        _drift_step(data, names, tau, float(t_train[0] + f * span), spacing_s / 2.0) for f in fracs
+    ]
     return DesignBlock(best.source, best.names, best.variant, alternatives=tuple(steps))
+
+
+#: Step times tried on the training span (10 % to 90 %), then refined by halving.
+DRIFT_STEP_TIMES = 17
+#: The refinement of a step time stops at this spacing [s] (or at the cadence, if coarser).
+DRIFT_STEP_RESOLUTION_S = 30.0
+
+
+def _drift_step(
+    data: DiagnosisData, names: list[str], tau: FloatArray, ts: float, half_s: float
+) -> DesignBlock:
+    """The drift's bias and scale step at ``ts`` with its bias trend. Its refinement tries the
+    step ``half_s`` earlier and later (each refining by half again): a step misplaced by half
+    the grid spacing leaves a box of the step's height that long, ~4 nT RMS over four orbits for
+    a 30 nT step, which other effects then take up."""
+    b = data.b_ref_body_nt
+    step = partial(_step_at, data.t_utc_s, ts)
+    kinds: list[Factor] = [step, partial(_scaled_by, b, step), tau]
+    cadence_s = float(np.median(np.diff(data.t_utc_s))) if data.n > 1 else 0.0
+    refine = None
+    if half_s >= max(DRIFT_STEP_RESOLUTION_S, cadence_s):
+        refine = partial(_drift_steps_near, data, names, tau, ts, half_s)
+    return DesignBlock(
+        PerAxisColumns(data.n, kinds), names, variant=f"step@{ts:.0f}+trend", refine=refine
+    )
+
+
+def _drift_steps_near(
+    data: DiagnosisData, names: list[str], tau: FloatArray, ts: float, half_s: float
+) -> list[DesignBlock]:
+    """The step ``half_s`` earlier and later, and at ``ts`` again refining by half as much."""
+    return [_drift_step(data, names, tau, ts + d, half_s / 2.0) for d in (-half_s, half_s, 0.0)]
 
 
 def _step_at(t_s: FloatArray, ts: float, index: Index) -> FloatArray:
