@@ -889,7 +889,8 @@ RESIDUAL_SCANNED: tuple[str, ...] = ("attitude_error",)
 #: chunk test cannot tell worse than it are tied too (the training BIC decides among them) [-].
 TIE_MAX_GAP = 0.10
 
-#: The best screened pairs beside which :meth:`Selection.triple` scans an attitude error again.
+#: The best screened triples :meth:`Selection.triple` fits, and the best screened pairs beside
+#: which it scans an attitude error again.
 TRIPLE_PAIRS = 3
 
 
@@ -1321,18 +1322,18 @@ class Selection:
         r_before: FloatArray,
         rms_before: float,
     ) -> tuple[Candidate, Candidate, Candidate] | None:
-        """Two effects and an effect of ``RESIDUAL_SCANNED`` scanned beside them, when no single
-        effect and no pair passes.
+        """Three effects that pass together when no single effect and no pair passes.
 
-        An attitude error's periods scanned on a residual that two other effects still fill are
-        wrong, and beside it those two leave their ranges (a nonlinearity's cross-track terms,
-        ill-determined in a nadir attitude, take up the attitude error's field), so no pair
-        passes. The pairs of the other candidates whose own fits take ``min_gain`` of the
-        training residual are screened (:meth:`_screen_pairs`); beside each of the
-        ``TRIPLE_PAIRS`` best the scan runs again. A triple passes when it shrinks the held-out
-        residual significantly (Bonferroni over every pair that could have been screened, times
-        the scanned effects) and each member does so on top of the other two, all inside their
-        ranges. The triple with the lowest held-out RMS is returned.
+        Beside two others, an effect can leave its range in every single and pair fit (a
+        nonlinearity's cross-track terms, ill-determined in a nadir attitude, take up whatever
+        field is left), and an attitude error's periods scanned on a residual that two other
+        effects still fill are wrong. Among the candidates whose own fits take ``min_gain`` of
+        the training residual, the triples and the pairs are screened (:meth:`_screen_pairs`);
+        the ``TRIPLE_PAIRS`` best triples are fitted, and beside each of the ``TRIPLE_PAIRS``
+        best pairs an effect of ``RESIDUAL_SCANNED`` is scanned again. A triple passes as
+        :meth:`_group_passes` (Bonferroni over every triple that could have been screened) --
+        with each member's form chosen again beside the others if it fails as chosen alone.
+        The triple with the lowest held-out RMS is returned.
         """
         from itertools import combinations
 
@@ -1348,32 +1349,44 @@ class Selection:
             ),
             key=lambda c: c.holdout_rms_nt,
         )
-        pairs = list(combinations(others, 2))
-        if not scanned or not pairs:
+        pairs = list(combinations(others, 2)) if scanned else []
+        triples = list(combinations(others, 3))
+        if not pairs and not triples:
             return None
-        level = self.alpha / (len(pairs) * len(scanned))
+        level = self.alpha / (len(pairs) * len(scanned) + len(triples))
         self._screen_huber_weights(r_before)
-        rms_screen = self._screen_pairs(fixed, [(a.block, b.block) for a, b in pairs])
-        ranked = sorted(zip(rms_screen, pairs, strict=True), key=lambda t: t[0])
+        groups: list[list[Candidate]] = []
+        if triples:
+            rms_t = self._screen_pairs(fixed, [[c.block for c in t] for t in triples])
+            ranked_t = sorted(zip(rms_t, triples, strict=True), key=lambda x: x[0])
+            groups += [list(t) for v, t in ranked_t[:TRIPLE_PAIRS] if v < rms_before]
+        if pairs:
+            rms_p = self._screen_pairs(fixed, [(a.block, b.block) for a, b in pairs])
+            ranked_p = sorted(zip(rms_p, pairs, strict=True), key=lambda x: x[0])
+            for v, (a, b) in ranked_p[:TRIPLE_PAIRS]:
+                if v >= rms_before:
+                    break
+                for name in scanned:
+                    block = self.design_beside(name, [*fixed, a.block, b.block])
+                    fit, r, rms = self.fit([*fixed, a.block, b.block, block])
+                    groups.append([a, b, Candidate(name, fit, r, rms, design=block)])
         best: tuple[float, list[Candidate]] | None = None
-        for approx, (a, b) in ranked[:TRIPLE_PAIRS]:
-            if approx >= rms_before:
-                break
-            for name in scanned:
-                block = self.design_beside(name, [*fixed, a.block, b.block])
-                fit, r, rms = self.fit([*fixed, a.block, b.block, block])
-                s = Candidate(name, fit, r, rms, design=block)
-                members = [a, b, s]
-                ok = self._group_passes(fixed, members, fit, r, rms, r_before, rms_before, level)
-                if not ok:
-                    again = self._beside_each_other(fixed, members)
-                    if again is not None:
-                        members, fit, r, rms = again
-                        ok = self._group_passes(
-                            fixed, members, fit, r, rms, r_before, rms_before, level
-                        )
-                if ok and (best is None or rms < best[0]):
-                    best = (rms, members)
+        for members in groups:
+            last = members[-1]
+            if last.design is not None and last.name in RESIDUAL_SCANNED:
+                fit, r, rms = last.fit, last.residual_nt, last.holdout_rms_nt  # fitted with all
+            else:
+                fit, r, rms = self.fit([*fixed, *(c.block for c in members)])
+            ok = self._group_passes(fixed, members, fit, r, rms, r_before, rms_before, level)
+            if not ok:
+                again = self._beside_each_other(fixed, members)
+                if again is not None:
+                    members, fit, r, rms = again
+                    ok = self._group_passes(
+                        fixed, members, fit, r, rms, r_before, rms_before, level
+                    )
+            if ok and (best is None or rms < best[0]):
+                best = (rms, members)
         if best is None:
             return None
         a, b, s = best[1]
@@ -1417,7 +1430,7 @@ class Selection:
         self._screen_holdout = held[:: max(1, -(-held.size // PAIR_SCREEN_SAMPLES))]
 
     def _screen_pairs(
-        self, fixed: Sequence[DesignBlock], pairs: Sequence[tuple[DesignBlock, DesignBlock]]
+        self, fixed: Sequence[DesignBlock], pairs: Sequence[Sequence[DesignBlock]]
     ) -> list[float]:
         """Held-out RMS of ``fixed`` plus each pair, each fitted once with the screen's fixed
         weights, all from two Gram matrices.
@@ -1472,8 +1485,8 @@ class Selection:
             plain = design.normal_equations(index, y, np.ones_like(y))
         lo_all, hi_all = _scaled_bounds(design.blocks, scale)
         out = []
-        for a, b in pairs:
-            cols = np.concatenate([base_cols, cols_of[id(a)], cols_of[id(b)]])
+        for group in pairs:
+            cols = np.concatenate([base_cols, *(cols_of[id(bl)] for bl in group)])
             sub = np.ix_(cols, cols)
             prior_mean = np.zeros(cols.size)
             prior_precision = np.zeros(cols.size)
@@ -1481,7 +1494,7 @@ class Selection:
                 # the priors' noise level as fit_joint takes it: the residual of the same model
                 # by plain least squares (one pass over the screen's samples)
                 theta0 = np.linalg.lstsq(plain[0][sub], plain[1][cols], rcond=1e-13)[0]
-                r0 = BlockedDesign(self.data, [*fixed, a, b]).residual(index, y, theta0)
+                r0 = BlockedDesign(self.data, [*fixed, *group]).residual(index, y, theta0)
                 noise = _robust_sigma(r0)
                 if prior is not None:
                     prior_mean[:12], prior_precision[:12] = _calibration_prior_terms(prior, scale)
