@@ -257,6 +257,27 @@ def test_a_drift_step_time_is_refined_between_the_grid_times(real_tles_text: str
     _found_exactly(out, set(case.effects))
 
 
+def test_an_attitude_error_chosen_alone_is_chosen_again_with_the_others(
+    real_tles_text: str,
+) -> None:
+    """A bias step, an attitude error and a thermal offset (nadir): the attitude error passed
+    alone at the first step, its periods scanned on a residual the step still filled, and beside
+    them the thermal offset did not pass (7.2 nT left, the attitude error and the drift named).
+    Stuck with a scanned effect chosen, the selection runs the group
+    steps again without it: the drift with the attitude error scanned beside it, then the
+    thermal offset."""
+    case = CompoundCase(
+        43,
+        ("parameter_drift", "attitude_error", "temperature"),
+        (1.0, 1.0, 1.0),
+        "nadir",
+        25544,
+        1796488990,
+    )
+    out = run_compound_case(case, tle_text=real_tles_text)
+    _found_exactly(out, set(case.effects))
+
+
 def _selection(
     effect: str, *, seed: int = 3, attitude: str = "tumbling", magnitude: float = 1.0
 ) -> Selection:

@@ -1910,6 +1910,7 @@ def _forward(
         current_fit, current_r, current_rms = sel.fit(blocks)
     else:
         current_r, current_rms = r_base, base_rms
+    released = False  # the scanned effects chosen again without them, once
     while len(chosen) < max_steps:
         names_in = {c.name for c in chosen}
         remaining = [n for n in sel.designs if n not in names_in and n not in excluded]
@@ -1949,12 +1950,82 @@ def _forward(
             if group is None and len(chosen) + 3 <= max_steps:
                 # nor a pair: two effects with an attitude error scanned beside them
                 group = sel.triple(blocks, tried, current_r, current_rms)
+            if group is None and not released:
+                released = True
+                again = _released(
+                    sel, chosen, single, r_base, base_rms, max_steps, excluded, current_r
+                )
+                if again is not None:
+                    chosen[:] = again
+                    blocks = [c.block for c in chosen]
+                    current_fit, current_r, current_rms = sel.fit(blocks)
+                    continue
             if group is None:
                 break
             new = list(group)
         chosen.extend(new)
         blocks.extend(c.block for c in new)
         current_fit, current_r, current_rms = sel.fit(blocks)
+
+
+def _released(
+    sel: Selection,
+    chosen: Sequence[Candidate],
+    single: dict[str, Candidate],
+    r_base: FloatArray,
+    base_rms: float,
+    max_steps: int,
+    excluded: Sequence[str],
+    current_r: FloatArray,
+) -> list[Candidate] | None:
+    """A stuck selection that holds an effect of ``RESIDUAL_SCANNED``, chosen again without it.
+
+    An attitude error can pass alone at the first step with its periods scanned on a residual
+    that other effects still fill; beside those wrong periods no other effect passes, alone or
+    in a pair. The group steps (:meth:`Selection.pair`, then :meth:`Selection.triple`) run again
+    from the selected effects less the scanned ones, with every candidate (the scanned ones
+    too, scanned again beside their partners); the pair, or the triple if it beats the pair
+    significantly by ``min_gain``, replaces the scanned effects when the model it makes shrinks
+    the held-out residual of the current one significantly (chunk test at ``alpha``) by
+    ``min_gain``. ``None`` otherwise.
+    """
+    if not any(c.name in RESIDUAL_SCANNED for c in chosen):
+        return None
+    keep = [c for c in chosen if c.name not in RESIDUAL_SCANNED]
+    fixed = [c.block for c in keep]
+    names = [n for n in sel.designs if n not in excluded and all(n != c.name for c in keep)]
+    if keep:
+        fit_k, r_k, rms_k = sel.fit(fixed)
+        options = [sel.candidate(fixed, n, r_k, fit_k, rms_k) for n in names]
+    else:
+        r_k, rms_k = r_base, base_rms
+        options = [single[n] for n in names if n in single]
+    groups: list[Sequence[Candidate]] = []
+    if len(keep) + 2 <= max_steps:
+        pair = sel.pair(fixed, options, r_k, rms_k)
+        if pair is not None:
+            groups.append(pair)
+    if len(keep) + 3 <= max_steps:
+        triple = sel.triple(fixed, options, r_k, rms_k)
+        if triple is not None:
+            groups.append(triple)
+    hold = sel.holdout
+    best: tuple[float, FloatArray, Sequence[Candidate]] | None = None
+    for g in groups:  # the pair first: the triple only if it beats the pair as a step would
+        _, r, rms = sel.fit([*fixed, *(c.block for c in g)])
+        if best is None or (
+            sel.gains(rms, best[0])
+            and _chunk_test(best[1][hold], r[hold], sel.n_chunks)[0] < sel.alpha
+        ):
+            best = (rms, r, g)
+    if best is None:
+        return None
+    rms_new, r_new, group = best
+    if not sel.gains(rms_new, norm_rms_nt(current_r[hold])):
+        return None
+    if _chunk_test(current_r[hold], r_new[hold], sel.n_chunks)[0] >= sel.alpha:
+        return None
+    return [*keep, *group]
 
 
 def _absorbed_by_calibration(
