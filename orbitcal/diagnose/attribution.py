@@ -1950,7 +1950,13 @@ def _forward(
             if group is None and len(chosen) + 3 <= max_steps:
                 # nor a pair: two effects with an attitude error scanned beside them
                 group = sel.triple(blocks, tried, current_r, current_rms)
-            if group is None and not released:
+            # Only while some candidate still shrinks the held-out residual (out of range or
+            # not significant): at the noise floor the group steps have nothing to find.
+            if (
+                group is None
+                and not released
+                and any(sel.gains(c.holdout_rms_nt, current_rms) for c in tried)
+            ):
                 released = True
                 again = _released(
                     sel, chosen, single, r_base, base_rms, max_steps, excluded, current_r
