@@ -33,8 +33,10 @@ class ParamRange:
         ``docs/diagnosis_priors.md``).
     prior_mean, prior_sd : float, optional
         A Gaussian prior inside the range, for parameters with a published value (a model's
-        amplitude is 1): it decides the direction the data leave open (on a 30-min pass a
-        scale factor and the ring current trade off) and hardly moves a well-determined fit.
+        amplitude is 1) and for those a common attitude leaves ill-determined (a nonlinearity's
+        cross-track terms in nadir): it decides the direction the data leave open (on a 30-min
+        pass a scale factor and the ring current trade off) and hardly moves a well-determined
+        fit.
     """
 
     lower: float
