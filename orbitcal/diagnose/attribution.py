@@ -1242,17 +1242,31 @@ class Selection:
         """Whether the pair's joint fit passes: inside the ranges, a significant shrink, and
         each member on top of the other (a's own test compares b alone, b's residual, with
         both)."""
-        if fit.at_bounds(len(fit.blocks) - 2) or fit.at_bounds(len(fit.blocks) - 1):
-            return False
-        if not self.gains(rms, rms_before):
-            return False
-        if _chunk_test(r_before[self.holdout], r[self.holdout], self.n_chunks)[0] >= level:
+        if not self._shrinks_inside(fit, r, rms, 2, r_before, rms_before, level):
             return False
         tests = [
             self.judge(fit, r, other.residual_nt, rms, other.holdout_rms_nt, k=k)
             for k, other in ((-2, b), (-1, a))
         ]
         return all(p < level and gains for p, gains in tests)
+
+    def _shrinks_inside(
+        self,
+        fit: JointFit,
+        r: FloatArray,
+        rms: float,
+        n: int,
+        r_before: FloatArray,
+        rms_before: float,
+        level: float,
+    ) -> bool:
+        """Whether the last ``n`` blocks of ``fit`` are inside their ranges and together shrink
+        the held-out residual by ``min_gain``, significantly at ``level`` (chunk test)."""
+        if any(fit.at_bounds(len(fit.blocks) - 1 - k) for k in range(n)):
+            return False
+        if not self.gains(rms, rms_before):
+            return False
+        return bool(_chunk_test(r_before[self.holdout], r[self.holdout], self.n_chunks)[0] < level)
 
     def _group_passes(
         self,
@@ -1269,11 +1283,7 @@ class Selection:
         a significant shrink of the held-out residual, and each member significant on top of
         all the others (refitted without it)."""
         n = len(members)
-        if any(fit.at_bounds(len(fit.blocks) - 1 - k) for k in range(n)):
-            return False
-        if not self.gains(rms, rms_before):
-            return False
-        if _chunk_test(r_before[self.holdout], r[self.holdout], self.n_chunks)[0] >= level:
+        if not self._shrinks_inside(fit, r, rms, n, r_before, rms_before, level):
             return False
         for k in range(n):
             rest = [m.block for j, m in enumerate(members) if j != k]
@@ -1948,7 +1958,7 @@ def _forward(
                 else None
             )
             if group is None and len(chosen) + 3 <= max_steps:
-                # nor a pair: two effects with an attitude error scanned beside them
+                # nor a pair: three effects together
                 group = sel.triple(blocks, tried, current_r, current_rms)
             # Only while some candidate still shrinks the held-out residual (out of range or
             # not significant): at the noise floor the group steps have nothing to find.

@@ -739,8 +739,11 @@ def _design_drift(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
 
     fracs = np.linspace(0.1, 0.9, DRIFT_STEP_TIMES)
     spacing_s = float(fracs[1] - fracs[0]) * span
+    cadence_s = float(np.median(np.diff(data.t_utc_s)))
+    finest_s = max(DRIFT_STEP_RESOLUTION_S, cadence_s)
     steps = [
-        _drift_step(data, names, tau, float(t_train[0] + f * span), spacing_s / 2.0) for f in fracs
+        _drift_step(data, names, tau, float(t_train[0] + f * span), spacing_s / 2.0, finest_s)
+        for f in fracs
     ]
     return DesignBlock(best.source, best.names, best.variant, alternatives=tuple(steps))
 
@@ -752,29 +755,41 @@ DRIFT_STEP_RESOLUTION_S = 30.0
 
 
 def _drift_step(
-    data: DiagnosisData, names: list[str], tau: FloatArray, ts: float, half_s: float
+    data: DiagnosisData,
+    names: list[str],
+    tau: FloatArray,
+    ts: float,
+    half_s: float,
+    finest_s: float,
 ) -> DesignBlock:
     """The drift's bias and scale step at ``ts`` with its bias trend. Its refinement tries the
-    step ``half_s`` earlier and later (each refining by half again): a step misplaced by half
-    the grid spacing leaves a box of the step's height that long, ~4 nT RMS over four orbits for
-    a 30 nT step, which other effects then take up."""
+    step ``half_s`` earlier and later (each refining by half again) while ``half_s`` is at least
+    ``finest_s``: a step misplaced by half the grid spacing leaves a box of the step's height
+    that long, ~4 nT RMS over four orbits for a 30 nT step, which other effects then take up."""
     b = data.b_ref_body_nt
     step = partial(_step_at, data.t_utc_s, ts)
     kinds: list[Factor] = [step, partial(_scaled_by, b, step), tau]
-    cadence_s = float(np.median(np.diff(data.t_utc_s))) if data.n > 1 else 0.0
     refine = None
-    if half_s >= max(DRIFT_STEP_RESOLUTION_S, cadence_s):
-        refine = partial(_drift_steps_near, data, names, tau, ts, half_s)
+    if half_s >= finest_s:
+        refine = partial(_drift_steps_near, data, names, tau, ts, half_s, finest_s)
     return DesignBlock(
         PerAxisColumns(data.n, kinds), names, variant=f"step@{ts:.0f}+trend", refine=refine
     )
 
 
 def _drift_steps_near(
-    data: DiagnosisData, names: list[str], tau: FloatArray, ts: float, half_s: float
+    data: DiagnosisData,
+    names: list[str],
+    tau: FloatArray,
+    ts: float,
+    half_s: float,
+    finest_s: float,
 ) -> list[DesignBlock]:
     """The step ``half_s`` earlier and later, and at ``ts`` again refining by half as much."""
-    return [_drift_step(data, names, tau, ts + d, half_s / 2.0) for d in (-half_s, half_s, 0.0)]
+    return [
+        _drift_step(data, names, tau, ts + d, half_s / 2.0, finest_s)
+        for d in (-half_s, half_s, 0.0)
+    ]
 
 
 def _step_at(t_s: FloatArray, ts: float, index: Index) -> FloatArray:
