@@ -1195,12 +1195,7 @@ class Selection:
         # A member whose design is a scan of the residual (the attitude periods) is scanned again
         # beside its partner: alone it took its periods from a residual the partner's field
         # still fills.
-        rss_before = float(np.sum(r_before[self.train] ** 2))
-        in_residual = {
-            c.name
-            for c in options
-            if float(np.sum(c.residual_nt[self.train] ** 2)) < (1.0 - self.min_gain) * rss_before
-        }
+        in_residual = {c.name for c in self._in_residual(options, r_before)}
         pairs = [self._pair_beside(fixed, a, b, in_residual) for a, b in pairs]
         self._screen_huber_weights(r_before)
         rms_screen = self._screen_pairs(fixed, [(a.block, b.block) for a, b in pairs])
@@ -1227,6 +1222,16 @@ class Selection:
             if ok and (best is None or rms < best[0]):
                 best = (rms, a, b)
         return None if best is None else (best[1], best[2])
+
+    def _in_residual(self, options: Sequence[Candidate], r_before: FloatArray) -> list[Candidate]:
+        """The candidates whose own fit takes at least ``min_gain`` of the training residual sum
+        of squares of ``r_before``: their field is in the residual."""
+        rss_before = float(np.sum(r_before[self.train] ** 2))
+        return [
+            c
+            for c in options
+            if float(np.sum(c.residual_nt[self.train] ** 2)) < (1.0 - self.min_gain) * rss_before
+        ]
 
     def _pair_passes(
         self,
@@ -1348,15 +1353,8 @@ class Selection:
         from itertools import combinations
 
         scanned = [n for n in RESIDUAL_SCANNED if n in self.designs and n in self.effects]
-        rss_before = float(np.sum(r_before[self.train] ** 2))
         others = sorted(
-            (
-                c
-                for c in options
-                if c.name not in RESIDUAL_SCANNED
-                and float(np.sum(c.residual_nt[self.train] ** 2))
-                < (1.0 - self.min_gain) * rss_before
-            ),
+            (c for c in self._in_residual(options, r_before) if c.name not in RESIDUAL_SCANNED),
             key=lambda c: c.holdout_rms_nt,
         )
         pairs = list(combinations(others, 2)) if scanned else []
