@@ -45,6 +45,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         action="store_true",
         help="leave the IHK1B temperature channels out of the table",
     )
+    g.add_argument(
+        "--every-s",
+        type=float,
+        metavar="S",
+        help="keep one MAG1B record per S seconds (e.g. 10 for 0.1 Hz; default: all, 2 Hz)",
+    )
     g.add_argument("--summary-json", metavar="FILE", help="also write the summary as JSON")
     g.set_defaults(func=run_gracefo)
     s = missions.add_parser(
@@ -83,7 +89,9 @@ def run_gracefo(args: argparse.Namespace) -> int:
     from orbitcal.ingest import GraceFOOptions, ingest_gracefo
 
     options = GraceFOOptions(
-        temperatures=not args.no_temperatures, temperature_sensor=args.temperature_sensor
+        temperatures=not args.no_temperatures,
+        temperature_sensor=args.temperature_sensor,
+        every_s=args.every_s,
     )
     return _report(ingest_gracefo(args.paths, out=args.out, options=options), args)
 

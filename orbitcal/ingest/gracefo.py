@@ -108,6 +108,9 @@ class GraceFOOptions:
     time_frac_unit : str or None
         ``"microseconds"`` or ``"nanoseconds"`` forces the unit of MAG1B's ``time_frac``; None
         (the default) takes the unit that agrees with the header's ``start_time_epoch_secs``.
+    every_s : float or None
+        Thin MAG1B to its first record in each ``every_s``-second bin of GPS time (e.g. 10 for
+        0.1 Hz, a month in a table a calibration can hold); None keeps every record (2 Hz).
     """
 
     chunk_rows: int = 50_000
@@ -118,6 +121,7 @@ class GraceFOOptions:
     min_temperature_cover: float = 0.95
     temperature_sensor: str | None = None
     time_frac_unit: str | None = None
+    every_s: float | None = None
 
 
 def gps_j2000_to_utc_s(t_gps_j2000_s: npt.ArrayLike) -> FloatArray:
@@ -511,7 +515,12 @@ class GraceFOSource:
             "qualflg",
         ]
         previous = -np.inf
+        last_bin = -np.inf
         n_in_file = 0
+        if opts.every_s is not None and not opts.every_s > 0:
+            raise IngestError(
+                f.path, f"every_s must be positive, got {opts.every_s}", field="every_s"
+            )
         for chunk in f.chunks(names, text=["GRACEFO_id", "time_ref"], chunk_rows=opts.chunk_rows):
             c = chunk.columns
             _check_ids(f, c["GRACEFO_id"], chunk.first_line)
@@ -537,6 +546,11 @@ class GraceFOSource:
             self._drop(keep, not_gps, "MAG1B time_ref not GPS")
             order: BoolArray = np.asarray(np.diff(np.concatenate([[previous], t])) > 0)
             self._drop(keep, ~order, "MAG1B time not after the previous record")
+            if opts.every_s is not None:
+                bins = np.floor(t / opts.every_s)
+                first_in_bin = np.diff(np.concatenate([[last_bin], bins])) > 0
+                last_bin = float(bins[-1])
+                self._drop(keep, ~first_in_bin, f"thinned to one record per {opts.every_s:g} s")
             seq = np.concatenate([[previous], t]) if np.isfinite(previous) else t
             _report_gaps(self.summary, "MAG1B", seq, 3 * _MAG_STEP_S)
             previous = float(max(previous, t.max()))
