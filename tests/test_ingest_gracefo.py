@@ -282,3 +282,18 @@ def test_the_cli_gives_a_one_line_error(tmp_path: Path, capsys: pytest.CaptureFi
     assert err.count("\n") == 1
     assert err.startswith("orbitcal ingest: ") and "no SCA1B file for 2023-06-01" in err
     assert not (tmp_path / "x.csv").exists()
+
+
+def test_the_recipe_commands_parse() -> None:
+    """Every ``orbitcal`` command of ``docs/real-data.md`` is accepted by the parser as written."""
+    import shlex
+
+    from orbitcal.cli import build_parser
+
+    doc = (Path(__file__).parents[1] / "docs" / "real-data.md").read_text()
+    commands = [line for line in doc.splitlines() if line.startswith("orbitcal ")]
+    assert len(commands) == 4
+    parser = build_parser()
+    for line in commands:
+        args = parser.parse_args(shlex.split(line)[1:])
+        assert callable(args.func)
