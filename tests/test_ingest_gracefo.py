@@ -297,3 +297,31 @@ def test_the_recipe_commands_parse() -> None:
     for line in commands:
         args = parser.parse_args(shlex.split(line)[1:])
         assert callable(args.func)
+
+
+def test_temperatures_covering_the_span_become_columns(tmp_path: Path) -> None:
+    """IHK1B moved 60 s earlier: sensors 21-23, 37, 38 (568.98 … 688.98 s) cover MAG1B's span."""
+    d = _copy_set(tmp_path)
+    ihk = d / _file("IHK1B").name
+    head, rows = _lines(ihk)
+    moved = [" ".join([str(int(r.split()[0]) - 60), *r.split()[1:]]) + "\n" for r in rows]
+    ihk.write_text("".join(head + moved))
+    res = ingest_gracefo(d, options=GraceFOOptions(temperature_sensor="21"))
+    t = res.telemetry
+    assert t is not None and len(t) == 100
+    taken = sorted(k for k in t.hk if k.startswith("hk_ihk1b"))
+    assert taken == [f"hk_ihk1b_t{s}_degc" for s in ("21", "22", "23", "37", "38")]
+    # sensor 21: 24.4216 °C at 568.983 s and 24.4216 °C at 688.983 s; 22: 24.9045 -> 24.9523
+    f = (600.083329 - 568.983328) / 120.0
+    assert t.hk["hk_ihk1b_t22_degc"][0] == pytest.approx(
+        24.90453916280846 + f * (24.9523162387049 - 24.90453916280846)
+    )
+    assert t.temperature_c is not None
+    np.testing.assert_allclose(t.temperature_c, t.hk["hk_ihk1b_t21_degc"])
+    assert any("left out: 05, 06" in n for n in res.summary.notes)
+
+
+def test_thinning_keeps_one_record_per_bin() -> None:
+    res = ingest_gracefo(DATA, options=GraceFOOptions(every_s=10.0))
+    assert res.summary.rows == 5  # 600.08, 610.08, 620.08, 630.08, 640.08 s
+    assert res.summary.dropped["thinned to one record per 10 s"] == 95
