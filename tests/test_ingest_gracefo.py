@@ -325,3 +325,25 @@ def test_thinning_keeps_one_record_per_bin() -> None:
     res = ingest_gracefo(DATA, options=GraceFOOptions(every_s=10.0))
     assert res.summary.rows == 5  # 600.08, 610.08, 620.08, 630.08, 640.08 s
     assert res.summary.dropped["thinned to one record per 10 s"] == 95
+
+
+def test_the_next_day_s_files_bridge_midnight(tmp_path: Path) -> None:
+    """A day whose last MAG1B samples fall after its own last GNV1B/SCA1B record (599.08 s,
+    599.58 s after 599 s) keeps them when the next day's files are given, and only then."""
+    d = _copy_set(tmp_path, ("MAG1B", "GNV1B", "SCA1B"))
+    shifts = {"MAG1B": -50, "GNV1B": -100, "SCA1B": -100}
+    for product, shift in shifts.items():
+        head, rows = _lines(_file(product))
+        moved = [" ".join([str(int(r.split()[0]) + shift), *r.split()[1:]]) + "\n" for r in rows]
+        text = "".join(head + moved)
+        text = text.replace(
+            "start_time_epoch_secs: 738849600.083329", "start_time_epoch_secs: 738849550.083329"
+        )
+        (d / _file(product).name.replace("2023-06-01", "2023-05-31")).write_text(text)
+    both = ingest_gracefo(d)
+    assert both.summary.rows == 200 and not both.summary.dropped
+    for product in shifts:
+        (d / _file(product).name).unlink()
+    alone = ingest_gracefo(d)
+    assert alone.summary.rows == 98
+    assert alone.summary.dropped == {"after GNV1B span": 2}

@@ -421,6 +421,7 @@ class GraceFOSource:
     def chunks(self) -> Iterator[Telemetry]:
         """The table, one MAG1B chunk at a time (rows in time order, UTC)."""
         prev_tail: dict[str, _Aux] = {}
+        prev_tail_date: str | None = None
         last_b: FloatArray | None = None
         for k, day in enumerate(self.days):
             prev_date = _shift_date(day.date, -1)
@@ -430,7 +431,9 @@ class GraceFOSource:
             _report_gaps(self.summary, "GNV1B", gnv.t_s, self.options.max_gap_gnv_s)
             _report_gaps(self.summary, "SCA1B", sca.t_s, self.options.max_gap_sca_s)
             before = {
-                p: prev_tail.get(p) or self._neighbour(prev_date, p, last=True)
+                p: prev_tail[p]
+                if prev_tail_date == prev_date
+                else self._neighbour(prev_date, p, last=True)
                 for p in ("GNV1B", "SCA1B")
             }
             after = {p: self._neighbour(next_date, p, last=False) for p in ("GNV1B", "SCA1B")}
@@ -438,6 +441,7 @@ class GraceFOSource:
                 "GNV1B": _tail(gnv, _NEIGHBOUR_RECORDS),
                 "SCA1B": _tail(sca, _NEIGHBOUR_RECORDS),
             }
+            prev_tail_date = day.date
             gnv = _with_neighbours(gnv, before["GNV1B"], after["GNV1B"])
             sca = _with_neighbours(sca, before["SCA1B"], after["SCA1B"])
             temps = self._temperatures(day, gnv, sca, first=(k == 0))
