@@ -80,6 +80,7 @@ _REQUIRED = ("MAG1B", "GNV1B", "SCA1B")
 _NEIGHBOUR_RECORDS = 3
 _MAG_STEP_S = 0.5
 _QUAT_NORM_TOL = 1e-3
+_MAG_FIELD = ("MfvX_RAW", "MfvY_RAW", "MfvZ_RAW")
 _REPEAT_KEY = "field equal to the previous record's (kept)"
 
 
@@ -135,6 +136,16 @@ class _Aux:
 
     t_s: FloatArray
     values: dict[str, FloatArray]
+
+
+@dataclass
+class _MagState:
+    """What MAG1B's checks carry from one chunk (and one day) to the next."""
+
+    previous: float = -np.inf
+    last_bin: float = -np.inf
+    last_b: FloatArray | None = None
+    n_in_file: int = 0
 
 
 @dataclass
@@ -509,28 +520,17 @@ class GraceFOSource:
             f.variable(n, units=("microTesla",))
         for n in MAG1B_CURRENTS:
             f.variable(n, units=("mA",))
-        names = [
-            "time_intg",
-            "time_frac",
-            "MfvX_RAW",
-            "MfvY_RAW",
-            "MfvZ_RAW",
-            *MAG1B_CURRENTS,
-            "qualflg",
-        ]
-        previous = -np.inf
-        last_bin = -np.inf
-        n_in_file = 0
         if opts.every_s is not None and not opts.every_s > 0:
             raise IngestError(
                 f.path, f"every_s must be positive, got {opts.every_s}", field="every_s"
             )
+        names = ["time_intg", "time_frac", *_MAG_FIELD, *MAG1B_CURRENTS, "qualflg"]
+        state = _MagState(last_b=last_b)
         for chunk in f.chunks(names, text=["GRACEFO_id", "time_ref"], chunk_rows=opts.chunk_rows):
             c = chunk.columns
             _check_ids(f, c["GRACEFO_id"], chunk.first_line)
-            n_rec = len(chunk)
-            n_in_file += n_rec
-            self.summary.records["MAG1B"] += n_rec
+            state.n_in_file += len(chunk)
+            self.summary.records["MAG1B"] += len(chunk)
             _count_bits(self.summary, "MAG1B", flag_bits(c["qualflg"]))
             intg = c["time_intg"].astype(np.float64)
             frac = c["time_frac"].astype(np.float64)
@@ -539,75 +539,92 @@ class GraceFOSource:
                     f, float(intg[0]), float(frac[0]), self.summary, opts.time_frac_unit
                 )
             t = intg + frac * self._frac_s
-            b_nt = (
-                np.column_stack([c[k] for k in ("MfvX_RAW", "MfvY_RAW", "MfvZ_RAW")]).astype(
-                    np.float64
-                )
-                * 1000.0
-            )
-            keep: BoolArray = np.ones(n_rec, dtype=np.bool_)
-            not_gps: BoolArray = np.asarray(c["time_ref"] != "G", dtype=np.bool_)
-            self._drop(keep, not_gps, "MAG1B time_ref not GPS")
-            order: BoolArray = np.asarray(np.diff(np.concatenate([[previous], t])) > 0)
-            self._drop(keep, ~order, "MAG1B time not after the previous record")
-            if opts.every_s is not None:
-                bins = np.floor(t / opts.every_s)
-                first_in_bin = np.diff(np.concatenate([[last_bin], bins])) > 0
-                last_bin = float(bins[-1])
-                self._drop(keep, ~first_in_bin, f"thinned to one record per {opts.every_s:g} s")
-            seq = np.concatenate([[previous], t]) if np.isfinite(previous) else t
-            _report_gaps(self.summary, "MAG1B", seq, 3 * _MAG_STEP_S)
-            previous = float(max(previous, t.max()))
-            prev_b = np.vstack([last_b if last_b is not None else np.full(3, np.nan), b_nt[:-1]])
-            repeats = int(np.count_nonzero(np.all(b_nt == prev_b, axis=1)))
-            if repeats:
-                self.summary.count_flags("MAG1B", {})
-                self.summary.flags["MAG1B"][_REPEAT_KEY] += repeats
-            last_b = b_nt[-1]
-            g = bracket(t, gnv.t_s, max_gap_s=opts.max_gap_gnv_s)
-            s = bracket(t, sca.t_s, max_gap_s=opts.max_gap_sca_s)
-            self._drop_outside(keep, g, "GNV1B")
-            self._drop_outside(keep, s, "SCA1B")
-            tb: dict[str, Bracket] = {}
-            for sensor, aux in temps.items():
-                tb[sensor] = bracket(t, aux.t_s, max_gap_s=opts.max_gap_ihk_s)
-                self._drop_outside(keep, tb[sensor], f"IHK1B T{sensor}")
-            if not keep.any():
-                continue
-            idx = np.flatnonzero(keep)
-
-            gk, sk = g.take(idx), s.take(idx)
-            hk: dict[str, npt.NDArray[Any]] = {
-                col: c[name][idx].astype(np.float64) for name, col in MAG1B_CURRENTS.items()
-            }
-            for sensor in self.temperature_sensors:
-                hk[_t_name(sensor)] = linear(
-                    temps[sensor].values["temperature_c"], tb[sensor].take(idx)
-                )
-            temperature = None
-            if opts.temperature_sensor is not None:
-                sensor = opts.temperature_sensor
-                temperature = linear(temps[sensor].values["temperature_c"], tb[sensor].take(idx))
-            t_utc = gps_j2000_to_utc_s(t[idx])
-            tel = Telemetry(
-                t_utc_s=t_utc,
-                b_raw_nt=b_nt[idx],
-                q_wxyz=slerp(sca.values["q_wxyz"], sk),
-                r_itrs_km=hermite_positions(gnv.values["r_km"], gnv.values["v_km_s"], gk),
-                temperature_c=temperature,
-                hk=hk,
-            )
-            self.summary.rows += len(tel)
-            first, last = utc_s_to_iso([t_utc[0], t_utc[-1]])
-            if self.summary.first_utc is None:
-                self.summary.first_utc = first
-            self.summary.last_utc = last
-            yield tel
-        if f.num_records is not None and n_in_file != f.num_records:
+            b_nt = np.column_stack([c[k] for k in _MAG_FIELD]).astype(np.float64) * 1000.0
+            keep = self._mag_keep(c, t, b_nt, state)
+            tel = self._join(c, t, b_nt, keep, gnv, sca, temps)
+            if tel is not None:
+                yield tel
+        if f.num_records is not None and state.n_in_file != f.num_records:
             self.summary.note(
-                f"{f.path.name} holds {n_in_file} of the {f.num_records} records "
+                f"{f.path.name} holds {state.n_in_file} of the {f.num_records} records "
                 "its header announces"
             )
+
+    def _mag_keep(
+        self, c: dict[str, npt.NDArray[Any]], t: FloatArray, b_nt: FloatArray, state: _MagState
+    ) -> BoolArray:
+        """MAG1B's own checks on a chunk: GPS time tags, order, thinning; gaps and repeats."""
+        every = self.options.every_s
+        keep: BoolArray = np.ones(t.shape[0], dtype=np.bool_)
+        self._drop(keep, np.asarray(c["time_ref"] != "G", dtype=np.bool_), "MAG1B time_ref not GPS")
+        order: BoolArray = np.asarray(np.diff(np.concatenate([[state.previous], t])) > 0)
+        self._drop(keep, ~order, "MAG1B time not after the previous record")
+        if every is not None:
+            bins = np.floor(t / every)
+            first_in_bin = np.diff(np.concatenate([[state.last_bin], bins])) > 0
+            state.last_bin = float(bins[-1])
+            self._drop(keep, ~first_in_bin, f"thinned to one record per {every:g} s")
+        seq = np.concatenate([[state.previous], t]) if np.isfinite(state.previous) else t
+        _report_gaps(self.summary, "MAG1B", seq, 3 * _MAG_STEP_S)
+        state.previous = float(max(state.previous, t.max()))
+        first_b = state.last_b if state.last_b is not None else np.full(3, np.nan)
+        prev_b = np.vstack([first_b, b_nt[:-1]])
+        repeats = int(np.count_nonzero(np.all(b_nt == prev_b, axis=1)))
+        if repeats:
+            self.summary.count_flags("MAG1B", {})
+            self.summary.flags["MAG1B"][_REPEAT_KEY] += repeats
+        state.last_b = b_nt[-1]
+        return keep
+
+    def _join(
+        self,
+        c: dict[str, npt.NDArray[Any]],
+        t: FloatArray,
+        b_nt: FloatArray,
+        keep: BoolArray,
+        gnv: _Aux,
+        sca: _Aux,
+        temps: dict[str, _Aux],
+    ) -> Telemetry | None:
+        """The chunk's kept samples inside every product's span, joined; None when none is."""
+        opts = self.options
+        g = bracket(t, gnv.t_s, max_gap_s=opts.max_gap_gnv_s)
+        s = bracket(t, sca.t_s, max_gap_s=opts.max_gap_sca_s)
+        self._drop_outside(keep, g, "GNV1B")
+        self._drop_outside(keep, s, "SCA1B")
+        tb: dict[str, Bracket] = {}
+        for sensor, aux in temps.items():
+            tb[sensor] = bracket(t, aux.t_s, max_gap_s=opts.max_gap_ihk_s)
+            self._drop_outside(keep, tb[sensor], f"IHK1B T{sensor}")
+        if not keep.any():
+            return None
+        idx = np.flatnonzero(keep)
+        hk: dict[str, npt.NDArray[Any]] = {
+            col: c[name][idx].astype(np.float64) for name, col in MAG1B_CURRENTS.items()
+        }
+        for sensor in self.temperature_sensors:
+            hk[_t_name(sensor)] = linear(
+                temps[sensor].values["temperature_c"], tb[sensor].take(idx)
+            )
+        temperature = None
+        if opts.temperature_sensor is not None:
+            sensor = opts.temperature_sensor
+            temperature = linear(temps[sensor].values["temperature_c"], tb[sensor].take(idx))
+        t_utc = gps_j2000_to_utc_s(t[idx])
+        tel = Telemetry(
+            t_utc_s=t_utc,
+            b_raw_nt=b_nt[idx],
+            q_wxyz=slerp(sca.values["q_wxyz"], s.take(idx)),
+            r_itrs_km=hermite_positions(gnv.values["r_km"], gnv.values["v_km_s"], g.take(idx)),
+            temperature_c=temperature,
+            hk=hk,
+        )
+        self.summary.rows += len(tel)
+        first, last = utc_s_to_iso([t_utc[0], t_utc[-1]])
+        if self.summary.first_utc is None:
+            self.summary.first_utc = first
+        self.summary.last_utc = last
+        return tel
 
     def _drop(self, keep: BoolArray, mask: BoolArray, reason: str) -> None:
         newly = mask & keep
