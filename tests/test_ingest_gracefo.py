@@ -7,6 +7,7 @@ provenance in its README). Figures checked here were measured independently of t
 
 from __future__ import annotations
 
+import json
 import shutil
 from dataclasses import replace
 from pathlib import Path
@@ -268,10 +269,15 @@ def test_the_cli_writes_the_table_and_prints_the_summary(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "gf.parquet"
-    assert main(["ingest", "gracefo", str(DATA), "--out", str(out)]) == 0
+    summary = tmp_path / "summary.json"
+    argv = ["ingest", "gracefo", str(DATA), "--out", str(out), "--summary-json", str(summary)]
+    assert main(argv) == 0
     printed = capsys.readouterr().out
     assert "GRACE C (GRACE-FO): 100 rows 2023-05-31T23:59:42.083329Z" in printed
     assert read_telemetry(out).telemetry.q_wxyz is not None
+    doc = json.loads(summary.read_text())
+    assert doc["rows"] == 100 and doc["out"] == str(out)
+    assert doc["records"]["MAG1B"] == 100 and doc["first"] == "2023-05-31T23:59:42.083329Z"
 
 
 def test_the_cli_gives_a_one_line_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
