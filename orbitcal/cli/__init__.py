@@ -44,6 +44,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "diagnose",
     "bench",
     "data",
+    "ingest",
 )
 
 #: Entry-point group through which other packages add sub-commands (``name = "module:register"``).
