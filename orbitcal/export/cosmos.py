@@ -161,7 +161,8 @@ def render_cosmos(
             f"{' '.join(raw)} {len(hk)} {' '.join(hk)} {args_tail}".replace("  ", " "),
         ]
     tlm = [
-        *header,
+        f"# orbitcal magnetometer calibration of {info.spacecraft} (generated; do not edit),",
+        f"# layout {layout(form)}: a new version of the same layout changes vars.json only.",
         "# orbitcal calibration version <%= magcal_version %>, document SHA-256 "
         "<%= magcal_sha256 %>",
         "SELECT_TELEMETRY <%= magcal_target %> <%= magcal_packet %>",
