@@ -4,71 +4,22 @@ stated), the float32 one within float32 rounding, and the tables' CRC-32s check 
 
 from __future__ import annotations
 
-import shutil
-import subprocess
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from export_consumers import run_c_header
 from export_worlds import EXACT_NT, Fitted, fitted
 
 from orbitcal.export import ExportOptions, affine_part, calibration_form, evaluate, export
 
-MAIN_C = r"""
-#include <stdio.h>
-#include "orbitcal_magcal.h"
-
-int main(void)
-{
-    double raw[3], hk[ORBITCAL_MAGCAL_N_HK + 1], out[3];
-    float rawf[3], hkf[ORBITCAL_MAGCAL_N_HK + 1], outf[3];
-    int i;
-    printf("%d %d\n", orbitcal_magcal_table_ok(), ORBITCAL_MAGCAL_VERSION);
-    while (scanf("%lf %lf %lf", &raw[0], &raw[1], &raw[2]) == 3) {
-        for (i = 0; i < ORBITCAL_MAGCAL_N_HK; i++) if (scanf("%lf", &hk[i]) != 1) return 2;
-        for (i = 0; i < 3; i++) rawf[i] = (float)raw[i];
-        for (i = 0; i < ORBITCAL_MAGCAL_N_HK; i++) hkf[i] = (float)hk[i];
-        orbitcal_magcal_apply_f64(raw, hk, out);
-        orbitcal_magcal_apply_f32(rawf, hkf, outf);
-        printf("%.17g %.17g %.17g %.9g %.9g %.9g\n", out[0], out[1], out[2],
-               (double)outf[0], (double)outf[1], (double)outf[2]);
-    }
-    return 0;
-}
-"""
-
 
 def _run_c(f: Fitted, tmp_path: Path, header: bytes) -> tuple[int, int, np.ndarray]:
-    cc = shutil.which("cc")
-    assert cc is not None, "a C compiler (cc) is needed"
-    (tmp_path / "orbitcal_magcal.h").write_bytes(header)
-    (tmp_path / "main.c").write_text(MAIN_C)
-    exe = tmp_path / "magcal"
-    subprocess.run(
-        [
-            cc,
-            "-std=c99",
-            "-Wall",
-            "-Werror",
-            "-pedantic",
-            "-O2",
-            "-o",
-            str(exe),
-            str(tmp_path / "main.c"),
-        ],
-        check=True,
-        capture_output=True,
-    )
     rows = np.flatnonzero(f.holdout)
-    inputs = f.telemetry.b_raw_nt[rows]
-    if f.x_hk is not None:
-        inputs = np.hstack([inputs, f.x_hk[rows]])
-    text = "\n".join(" ".join(repr(float(v)) for v in row) for row in inputs) + "\n"
-    out = subprocess.run([str(exe)], input=text, capture_output=True, text=True, check=True)
-    first, *lines = out.stdout.splitlines()
-    ok, version = (int(v) for v in first.split())
-    return ok, version, np.asarray([[float(v) for v in ln.split()] for ln in lines])
+    x = None if f.x_hk is None else f.x_hk[rows]
+    ok, version, b64, b32 = run_c_header(header, f.telemetry.b_raw_nt[rows], x)
+    return ok, version, np.hstack([b64, b32])
 
 
 @pytest.mark.parametrize("method", ["linear-hk", "lmbp-hk"])

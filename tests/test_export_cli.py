@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from export_consumers import run_polynomial
 from export_worlds import fitted
 
 from orbitcal.cli import main
@@ -60,8 +61,6 @@ def test_every_format_from_the_command_line(
 def test_polynomial_through_the_tools_own_evaluation(
     files: tuple[Path, Path, Any], tmp_path: Path
 ) -> None:
-    from openc3.conversions.polynomial_conversion import PolynomialConversion
-
     cal, tel, f = files
     out = tmp_path / "p.json"
     common = ["--telemetry", str(tel), "--tle", str(TLE), "--norad", "39452"]
@@ -70,17 +69,15 @@ def test_polynomial_through_the_tools_own_evaluation(
     aff = affine_part(calibration_form(f.document))
     rows = np.flatnonzero(f.holdout)
     raw = f.telemetry.b_raw_nt[rows]
-    b_poly = np.empty((len(rows), 3))
+    b_poly = run_polynomial(body, raw)
     for axis in body["axes"]:
         i = axis["axis"]
-        # COSMOS: the config line's coefficients through openc3's own conversion
-        words = axis["cosmos"].split()
-        assert words[0] == "POLY_READ_CONVERSION"
-        conv = PolynomialConversion(*words[1:])
-        b_poly[:, i] = [conv.call(v, None, None) for v in raw[:, i]]
         # XTCE: sum of coefficient * x**exponent over the Terms
         terms = ET.fromstring(axis["xtce"].replace("xtce:", "")).findall("Term")
-        xt = sum(float(t.get("coefficient")) * raw[:, i] ** int(t.get("exponent")) for t in terms)  # type: ignore[arg-type]
+        xt = sum(
+            float(str(t.get("coefficient"))) * raw[:, i] ** int(str(t.get("exponent")))
+            for t in terms
+        )
         assert np.allclose(xt, b_poly[:, i], rtol=0, atol=1e-9)
         assert axis["coefficients"][1] == aff.M[i, i]
     ref = f.b_apply_nt[rows]

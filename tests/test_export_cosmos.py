@@ -11,69 +11,25 @@ modules import nothing else this test reaches).
 from __future__ import annotations
 
 import json
-import re
-import sys
 import zipfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from export_consumers import run_cosmos
 from export_worlds import EXACT_NT, Fitted, fitted
 
 from orbitcal.export import ExportOptions, calibration_form, export
 
 
-def _render_erb(text: str, variables: dict[str, str]) -> str:
-    """The plugin install's ERB step for ``<%= name %>`` references (all this fragment uses)."""
-
-    def sub(m: re.Match[str]) -> str:
-        return variables[m.group(1)]
-
-    return re.sub(r"<%=\s*(\w+)\s*%>", sub, text)
-
-
-def _mission_packet(path: Path, items: list[str]) -> None:
-    lines = ['TELEMETRY INST MAG BIG_ENDIAN "magnetometer packet"']
-    lines += [f'  APPEND_ITEM {name} 64 FLOAT "raw input"' for name in items]
-    path.write_text("\n".join(lines) + "\n")
-
-
 def _cosmos_read(f: Fitted, tmp_path: Path, hk_names: dict[str, str]) -> tuple[np.ndarray, Any]:
-    from openc3.packets.packet_config import PacketConfig
-
-    result = export(f.document, ExportOptions(format="cosmos", hk_names=hk_names))
-    out = tmp_path / "fragment"
-    result.write(out)
-    variables = json.loads((out / "vars.json").read_text())
-    target = out / "targets" / "MAGCAL"
-    rendered = tmp_path / "magcal_tlm.txt"
-    rendered.write_text(_render_erb((target / "cmd_tlm" / "magcal_tlm.txt").read_text(), variables))
-    form = calibration_form(f.document)
-    hk_items = [hk_names.get(c, c.upper()) for c in form.hk_names]
-    mission = tmp_path / "mission_tlm.txt"
-    _mission_packet(mission, ["MAG_X_RAW", "MAG_Y_RAW", "MAG_Z_RAW", *hk_items])
-    sys.path.insert(0, str(target / "lib"))
-    sys.modules.pop("mag_calibration", None)
-    try:
-        config = PacketConfig()
-        config.process_file(str(mission), "INST")
-        config.process_file(str(rendered), "INST")
-        packet = config.telemetry["INST"]["MAG"]
-        conversion = packet.get_item("MAG_X_CAL").read_conversion
-        rows = np.flatnonzero(f.holdout)
-        b = np.empty((len(rows), 3))
-        for k, i in enumerate(rows):
-            packet.write("MAG_X_RAW", float(f.telemetry.b_raw_nt[i, 0]))
-            packet.write("MAG_Y_RAW", float(f.telemetry.b_raw_nt[i, 1]))
-            packet.write("MAG_Z_RAW", float(f.telemetry.b_raw_nt[i, 2]))
-            for j, name in enumerate(hk_items):
-                assert f.x_hk is not None
-                packet.write(name, float(f.x_hk[i, j]))
-            b[k] = [packet.read(n) for n in ("MAG_X_CAL", "MAG_Y_CAL", "MAG_Z_CAL")]
-    finally:
-        sys.path.remove(str(target / "lib"))
-    return b, conversion
+    files = export(f.document, ExportOptions(format="cosmos", hk_names=hk_names)).files
+    assert files is not None
+    hk_items = [hk_names.get(c, c.upper()) for c in calibration_form(f.document).hk_names]
+    rows = np.flatnonzero(f.holdout)
+    x = None if f.x_hk is None else f.x_hk[rows]
+    return run_cosmos(files, hk_items, f.telemetry.b_raw_nt[rows], x)
 
 
 @pytest.mark.parametrize("method", ["linear-hk", "lmbp-hk"])
