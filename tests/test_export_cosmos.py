@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import pytest
 from export_consumers import run_cosmos
-from export_worlds import EXACT_NT, Fitted, fitted
+from export_worlds import ALL_METHODS, EXACT_NT, Fitted, fitted
 
 from orbitcal.export import ExportOptions, calibration_form, export
 
@@ -32,7 +32,7 @@ def _cosmos_read(f: Fitted, tmp_path: Path, hk_names: dict[str, str]) -> tuple[n
     return run_cosmos(files, hk_items, f.telemetry.b_raw_nt[rows], x)
 
 
-@pytest.mark.parametrize("method", ["linear-hk", "lmbp-hk"])
+@pytest.mark.parametrize("method", ALL_METHODS)
 def test_cosmos_conversion_in_openc3_equals_apply(
     method: str, tmp_path: Path, swarm_a_temperature_world: Any
 ) -> None:
