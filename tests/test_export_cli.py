@@ -114,3 +114,11 @@ def test_not_a_calibration_document(tmp_path: Path, capsys: pytest.CaptureFixtur
     bad.write_text('{"spacecraft": "x"}')
     assert main(["export", str(bad), "--format", "xtce", "--out", str(tmp_path / "o")]) == 2
     assert "not a calibration document" in capsys.readouterr().err
+
+
+def test_the_command_offers_the_library_formats() -> None:
+    from orbitcal.cli import export as cli_export
+    from orbitcal.export import FORMATS
+
+    # the CLI keeps its own copy so that `orbitcal --help` imports no numpy
+    assert cli_export._FORMATS == FORMATS

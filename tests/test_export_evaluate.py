@@ -168,3 +168,37 @@ def test_evaluator_needs_no_torch() -> None:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     # u = 0 -> h = 0 -> y = 0 -> b = (0 + 1) / 1 + 0 = 1 on every axis
     assert json.loads(out.stdout) == [[1.0, 1.0, 1.0]]
+
+
+def test_public_surface() -> None:
+    import orbitcal.export as ex
+
+    assert sorted(ex.__all__) == sorted(
+        [
+            "DEFAULT_CAL_NAMES",
+            "DEFAULT_RAW_NAMES",
+            "FORMATS",
+            "AffineForm",
+            "ExportError",
+            "ExportOptions",
+            "ExportResult",
+            "HeldOutLoss",
+            "NetworkForm",
+            "ProductInfo",
+            "YamcsTarget",
+            "affine_part",
+            "calibration_form",
+            "document_sha256",
+            "evaluate",
+            "evaluate_document",
+            "export",
+            "held_out_loss",
+            "hk_columns",
+            "parse_hk_names",
+            "parse_names",
+            "product_info",
+        ]
+    )
+    assert ex.FORMATS == ("json", "xtce", "yamcs-push", "cosmos", "c-header", "polynomial")
+    assert ex.DEFAULT_RAW_NAMES == ("MAG_X_RAW", "MAG_Y_RAW", "MAG_Z_RAW")
+    assert ex.DEFAULT_CAL_NAMES == ("MAG_X_CAL", "MAG_Y_CAL", "MAG_Z_CAL")
