@@ -53,12 +53,14 @@ def held_out_loss(
     *,
     orbit: Any = None,
     attitude_frame: str | None = None,
+    all_held_out: str | None = None,
 ) -> HeldOutLoss:
     """Held-out RMS [nT] of the whole calibration and of the reduced forms the exports carry.
 
     The held-out rows are the later time blocks of ``telemetry`` (the document's
-    ``metrics.holdout_fraction``, else 0.25), the reference field the document's; for scalar
-    methods the figure is the scalar one (``|b_cal| - |B_ref|``), as for their
+    ``metrics.holdout_fraction``, else 0.25) or, with ``all_held_out`` (a sentence saying why,
+    e.g. the span a retraining held out), every row; the reference field is the document's. For
+    scalar methods the figure is the scalar one (``|b_cal| - |B_ref|``), as for their
     ``holdout_rms_nt``.
     """
     from orbitcal.calibrate.holdout import later_block_split
@@ -74,7 +76,12 @@ def held_out_loss(
     data, _ = fit_data_for_telemetry(
         tel, orbit=orbit, field=str(doc["reference_field"]), attitude_frame=frame
     )
-    _, hold = later_block_split(tel.t_utc_s, fraction)
+    if all_held_out is None:
+        _, hold = later_block_split(tel.t_utc_s, fraction)
+        where = f"the latest {fraction:.0%} of the table's samples"
+    else:
+        hold = np.ones(len(tel), dtype=bool)
+        where = all_held_out
     if not np.any(hold):
         raise BadInputError("the table has no held-out rows to measure on", field="telemetry")
     raw = np.asarray(tel.b_raw_nt, dtype=np.float64)[hold]
@@ -107,8 +114,7 @@ def held_out_loss(
         diagonal_rms_nt=score(diag),
         affine_max_abs_diff_nt=float(np.max(np.abs(aff - full))),
         diagonal_max_abs_diff_nt=float(np.max(np.abs(diag - full))),
-        source=f"{source} on the latest {fraction:.0%} of the table's samples, "
-        f"{doc['reference_field']}",
+        source=f"{source} on {where}, {doc['reference_field']}",
     )
 
 

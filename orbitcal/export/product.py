@@ -26,12 +26,15 @@ from orbitcal.calibrate.errors import DocumentError
 
 __all__ = [
     "NETWORK_METHODS",
+    "SCALAR_METHODS",
     "AffineForm",
     "NetworkForm",
     "ProductInfo",
     "affine_part",
     "calibration_form",
     "document_sha256",
+    "is_exact_affine",
+    "layout",
     "product_info",
 ]
 

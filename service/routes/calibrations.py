@@ -201,7 +201,17 @@ async def calibration_in_service(
         )
     if format is not None:
         doc = orjson.loads(hit.body)
-        return await run_in_threadpool(export_response, doc, format, raw_names, cal_names, hk_names)
+        return await run_in_threadpool(
+            lambda: export_response(
+                doc,
+                format,
+                raw_names,
+                cal_names,
+                hk_names,
+                engine=engine,
+                spacecraft_id=spacecraft_id,
+            )
+        )
     return _calibration_response(hit, request.headers.get("if-none-match"))
 
 

@@ -98,7 +98,15 @@ def test_formats_over_http(served: Served) -> None:
     files = zipfile.ZipFile(io.BytesIO(answers["cosmos"].content)).namelist()
     assert "targets/MAGCAL/lib/mag_calibration.py" in files
     assert b"ORBITCAL_MAGCAL_SHA256" in answers["c-header"].content
-    assert json.loads(answers["polynomial"].content)["product"]["version"] == 1
+    poly = json.loads(answers["polynomial"].content)
+    assert poly["product"]["version"] == 1
+    # the diagonal's loss is measured on the samples the version's retraining held out: there
+    # the whole model gives the document's own held-out RMS
+    held = poly["held_out"]
+    assert held is not None and "retraining held out" in held["source"], held
+    assert held["n_samples"] == doc["metrics"]["n_holdout"]
+    assert held["full_rms_nt"] == pytest.approx(doc["metrics"]["holdout_rms_nt"], rel=1e-9)
+    assert held["diagonal_rms_nt"] > held["full_rms_nt"]
     body = json.loads(answers["yamcs-push"].content)
     assert {r["id"]["name"] for r in body["request"]} == set(served.mdb)
     assert [e.status_code for e in errors] == [422, 422, 404, 401]
@@ -119,6 +127,7 @@ def test_dashboard_downloads(served: Served, tmp_path: Path) -> None:
     })()"""
     with Browser() as browser:
         browser.navigate(served.server.url + "/dashboard")
+        assert browser.wait_for("document.body.dataset.ready") == "needs-key"
         browser.evaluate(f"localStorage.setItem('orbitcal.apiKey', {json.dumps(ADMIN_KEY)})")
         browser.navigate(served.server.url + "/dashboard#sc=swarm-a")
         assert browser.wait_for("document.body.dataset.ready") == "swarm-a"
