@@ -93,6 +93,7 @@ def test_polynomial_through_the_tools_own_evaluation(
         (["--format", "xtce", "--raw-names", "A,B"], "--raw-names takes three names"),
         (["--format", "xtce", "--cal-names", "MAG_X_RAW,B,C"], "must differ"),
         (["--format", "xtce", "--hk-names", "temperature"], "COLUMN=NAME"),
+        (["--format", "xtce", "--hk-names", "temperature=MAG_X_RAW"], "MAG_X_RAW named twice"),
         (["--format", "yamcs-push"], "needs --yamcs-url and --yamcs-instance"),
     ],
 )

@@ -25,7 +25,7 @@ import xml.etree.ElementTree as ET
 
 from orbitcal.export._text import f64, loss_lines
 from orbitcal.export.javascript import INPUT_RAW, OUTPUTS, algorithm_text, hk_inputs
-from orbitcal.export.options import ExportOptions
+from orbitcal.export.options import ExportError, ExportOptions
 from orbitcal.export.product import (
     AffineForm,
     NetworkForm,
@@ -110,6 +110,15 @@ def render_xtce(form: AffineForm | NetworkForm, info: ProductInfo, options: Expo
     exact = is_exact_affine(form)
     hk_cols = list(form.hk_names)
     hk_params = [options.hk_parameter(c) for c in hk_cols]
+    names = [*options.raw_names, *hk_params, *options.cal_names]
+    names += [lin_name(n) for n in options.cal_names]
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    if repeated:
+        raise ExportError(
+            f"parameter names must differ; {', '.join(repeated)} named twice "
+            "(raw, housekeeping and calibrated names)",
+            field="hk_names",
+        )
     root = ET.Element(_T + "SpaceSystem", {"name": sys_})
     desc = _sub(root, "LongDescription")
     desc.text = (
