@@ -12,6 +12,8 @@ from typing import Any
 import numpy as np
 import pytest
 from export_worlds import ALL_METHODS, EXACT_NT, fitted
+from hypothesis import given
+from hypothesis import strategies as st
 
 from orbitcal.calibrate.errors import DocumentError
 from orbitcal.errors import BadInputError
@@ -202,3 +204,69 @@ def test_public_surface() -> None:
     assert ex.FORMATS == ("json", "xtce", "yamcs-push", "cosmos", "c-header", "polynomial")
     assert ex.DEFAULT_RAW_NAMES == ("MAG_X_RAW", "MAG_Y_RAW", "MAG_Z_RAW")
     assert ex.DEFAULT_CAL_NAMES == ("MAG_X_CAL", "MAG_Y_CAL", "MAG_Z_CAL")
+
+
+@given(
+    n_hidden=st.integers(1, 4),
+    n_hk=st.integers(0, 3),
+    activation=st.sampled_from(["tanh", "sigmoid"]),
+    linear_path=st.booleans(),
+    constant_column=st.booleans(),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_evaluator_equals_the_torch_network_on_random_networks(
+    n_hidden: int, n_hk: int, activation: str, linear_path: bool, constant_column: bool, seed: int
+) -> None:
+    """Any network the document format can hold (sizes, activations, a constant input or
+    output column whose scaler maps to 0): the numpy evaluator equals LMBPCalibration.apply."""
+    from orbitcal.calibrate.document import calibration_from_document
+
+    rng = np.random.default_rng(seed)
+    n_in = 3 + n_hk
+    lo_in = rng.normal(scale=3e4, size=n_in)
+    hi_in = lo_in + rng.uniform(1.0, 6e4, size=n_in)
+    lo_out = rng.normal(scale=3e4, size=3)
+    hi_out = lo_out + rng.uniform(1.0, 6e4, size=3)
+    if constant_column:
+        hi_in[-1] = lo_in[-1]
+        hi_out[1] = lo_out[1]
+    weights = {
+        "W1": rng.normal(size=(n_hidden, n_in)).tolist(),
+        "b1": rng.normal(size=n_hidden).tolist(),
+        "W2": rng.normal(size=(3, n_hidden)).tolist(),
+        "b2": rng.normal(size=3).tolist(),
+    }
+    if linear_path:
+        weights["L"] = rng.normal(size=(3, n_in)).tolist()
+    hk = [f"hk_c{j}" for j in range(n_hk)]
+    doc: dict[str, Any] = {
+        "method": "lmbp-hk" if n_hk else "lmbp",
+        "linear": {"M": np.eye(3).tolist(), "o": [0.0, 0.0, 0.0]},
+        "model": {
+            "n_hidden": n_hidden,
+            "activation": activation,
+            "linear_path": linear_path,
+            "hk_names": hk,
+            "input_scaler": {"min": lo_in.tolist(), "max": hi_in.tolist()},
+            "output_scaler": {"min": lo_out.tolist(), "max": hi_out.tolist()},
+            "weights": weights,
+        },
+    }
+    x = lo_in + rng.uniform(-0.2, 1.2, size=(50, n_in)) * (hi_in - lo_in)
+    b_raw, x_hk = x[:, :3], (x[:, 3:] if n_hk else None)
+    expected = calibration_from_document(doc).apply(b_raw, x_hk)
+    got = evaluate_document(doc, b_raw, x_hk)
+    assert np.max(np.abs(got - expected)) < EXACT_NT
+    if linear_path and not constant_column:
+        # (the affine formats need M invertible: with a linear path, as lmbp-hk has, it is; a
+        # constant output or fewer than 3 hidden units without one make it singular: refused)
+        form = calibration_form(doc)
+        assert isinstance(form, NetworkForm)
+        x0 = form.in_lo + 1.0 / form.in_gain  # the centre of the input box: u = 0
+        c0 = x0[None, :3], (x0[None, 3:] if n_hk else None)
+        assert np.max(np.abs(evaluate(affine_part(form), *c0) - evaluate(form, *c0))) < 1e-6
+        step = 1e-5 / form.in_gain[0]  # central difference along raw x (u moves by 1e-5)
+        d = np.zeros((1, 3))
+        d[0, 0] = step
+        slope = (evaluate(form, c0[0] + d, c0[1]) - evaluate(form, c0[0] - d, c0[1])) / (2 * step)
+        assert np.allclose(slope[0], affine_part(form).M[:, 0], rtol=1e-6, atol=1e-9)

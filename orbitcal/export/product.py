@@ -310,10 +310,14 @@ def affine_part(form: AffineForm | NetworkForm) -> AffineForm:
     A = s_out[:, None] * (J * form.in_gain[None, :])  # d b_cal / d x
     d = form.out_lo + s_out * (c + 1.0 - J @ (form.in_gain * form.in_lo + e_in))
     M = A[:, :3]
-    try:
-        Minv = np.linalg.inv(M)
-    except np.linalg.LinAlgError as exc:
-        raise DocumentError(f"the network's affine part is singular: {exc}") from exc
+    cond = float(np.linalg.cond(M))
+    if not cond < 1e10:
+        raise DocumentError(
+            f"the network's affine part is singular (condition number {cond:.3g}): it cannot be "
+            "written as b_cal = M (b_raw - o - K hk); export a format that carries the whole "
+            "network (xtce's JavaScript, cosmos)"
+        )
+    Minv = np.linalg.inv(M)
     return AffineForm(M=M, o=-Minv @ d, K=-Minv @ A[:, 3:], hk_names=form.hk_names)
 
 
