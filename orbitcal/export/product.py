@@ -314,8 +314,8 @@ def affine_part(form: AffineForm | NetworkForm) -> AffineForm:
     if not cond < 1e10:
         raise DocumentError(
             f"the network's affine part is singular (condition number {cond:.3g}): it cannot be "
-            "written as b_cal = M (b_raw - o - K hk); export a format that carries the whole "
-            "network (xtce's JavaScript, cosmos)"
+            "written as b_cal = M (b_raw - o - K hk), which the xtce MathAlgorithms, c-header "
+            "and polynomial carry; cosmos carries the whole network"
         )
     Minv = np.linalg.inv(M)
     return AffineForm(M=M, o=-Minv @ d, K=-Minv @ A[:, 3:], hk_names=form.hk_names)
