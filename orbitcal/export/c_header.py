@@ -123,7 +123,8 @@ def render_c_header(
     )
     comment.append(
         "float32 table and function: coefficients and arithmetic rounded to float32 "
-        "(relative 6e-8, i.e. a few thousandths of a nT at 50,000 nT); float64 is exact"
+        "(relative 6e-8 per operation; about 0.01 nT at 50,000 nT, docs/export/results.md); "
+        "the float64 ones carry the table exactly"
     )
     comment.append(
         "hk inputs, in order: " + (", ".join(aff.hk_names) if aff.hk_names else "(none)")
