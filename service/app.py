@@ -33,6 +33,7 @@ from service.ratelimit import Buckets, MemoryBuckets, RateLimit, RedisBuckets
 from service.routes import (
     calibrations,
     dashboard,
+    exports,
     jobs,
     keys,
     ops,
@@ -377,6 +378,7 @@ def create_app(
 
     for module in (ops, spacecraft, telemetry, quarantine, calibrations, jobs, keys, dashboard):
         app.include_router(module.router)
+    app.include_router(exports.router)  # issue 21: /calibrations/{version}[?format=F]
     return app
 
 

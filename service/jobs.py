@@ -262,7 +262,11 @@ def _retrain(
                 provenance=provenance,
             )
         )
+    from service.yamcs_hook import push_after_promotion  # issue 21
+
+    pushed = push_after_promotion(settings, document) if decision.promote else None
     return {
+        "yamcs_push": pushed,
         "version": version,
         "promoted": decision.promote,
         "reason": decision.reason,

@@ -88,4 +88,13 @@ class Settings(BaseSettings):
     #: rate limiter needs ``RATE_LIMIT_REDIS_URL`` (or is off), so that the limits hold in total.
     workers: int = Field(default=1, ge=1)
 
+    #: ``yamcs-push`` after each promotion (issue 21, ``service/yamcs_hook.py``): the Yamcs base
+    #: URL (empty: off), instance, processor, SpaceSystem of the loaded XTCE export, credentials.
+    yamcs_push_url: str = ""
+    yamcs_push_instance: str = ""
+    yamcs_push_processor: str = "realtime"
+    yamcs_push_space_system: str = "MAGCAL"
+    yamcs_push_user: str = ""
+    yamcs_push_password: SecretStr | None = None
+
     log_level: str = "INFO"

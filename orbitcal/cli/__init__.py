@@ -40,6 +40,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "simulate",
     "calibrate",
     "apply",
+    "export",
     "reproduce",
     "diagnose",
     "bench",

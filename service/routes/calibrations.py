@@ -24,6 +24,7 @@ from orbitcal.metrics import norm_rms_nt, rms_nt
 from service.auth import Principal, require_scope
 from service.deps import EngineDep, SettingsDep, get_spacecraft, iso
 from service.jobs import create_job
+from service.routes.exports import FormatQuery, HkQuery, NamesQuery, export_response
 from service.schemas import (
     CalibrationDocument,
     CalibrationVersionPublic,
@@ -166,8 +167,13 @@ async def calibration_in_service(
     engine: EngineDep,
     settings: SettingsDep,
     _who: Annotated[Principal, require_scope("read")],
+    format: FormatQuery = None,
+    raw_names: NamesQuery = None,
+    cal_names: NamesQuery = None,
+    hk_names: HkQuery = None,
 ) -> Response:
-    """The calibration in service (CONTRACT section 4); 404 before the first.
+    """The calibration in service (CONTRACT section 4); 404 before the first. With
+    ``?format=F`` its export (section 7, ``routes/exports.py``).
 
     The answer carries an ``ETag`` (the version and a digest of the document); a request whose
     ``If-None-Match`` names it gets 304 without a body. Answers are served from memory for
@@ -192,6 +198,19 @@ async def calibration_in_service(
     if hit.body is None:
         raise HTTPException(
             status_code=404, detail=f"spacecraft {spacecraft_id!r} has no calibration in service"
+        )
+    if format is not None:
+        doc = orjson.loads(hit.body)
+        return await run_in_threadpool(
+            lambda: export_response(
+                doc,
+                format,
+                raw_names,
+                cal_names,
+                hk_names,
+                engine=engine,
+                spacecraft_id=spacecraft_id,
+            )
         )
     return _calibration_response(hit, request.headers.get("if-none-match"))
 
@@ -237,7 +256,7 @@ class CalibrationFastPath:
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] == "http" and scope["method"] == "GET":
             match = _CALIBRATION_PATH.fullmatch(scope["path"])
-            if match is not None:
+            if match is not None and b"format=" not in scope.get("query_string", b""):
                 spacecraft_id = match.group(1)
                 hit: ServedCalibration | None = self.state.calibration_cache.get(spacecraft_id)
                 if (

@@ -1,0 +1,220 @@
+"""``xtce``: an XTCE 1.2 SpaceSystem for Yamcs (CONTRACT section 7).
+
+What it holds (namespace ``http://www.omg.org/spec/XTCE/20180204``, valid against the XTCE 1.2
+schema, ``tests/authorities/xtce/``):
+
+* the raw axes [nT] and housekeeping inputs, unless given as qualified references
+  (``/MYSAT/MAG_X``) to parameters the mission's MDB already defines;
+* the calibrated axes [nT] (``dataSource="derived"``), outputs of a JavaScript
+  ``CustomAlgorithm`` that carries the **whole** calibration (the network too, for LM-BP);
+* every coefficient as a local parameter (``dataSource="local"``, ``initialValue`` = this
+  version), so ``yamcs-push`` (``POST .../parameters:batchSet``) installs a new version of the
+  same layout without an MDB reload; ``<SYS>_VERSION``, ``<SYS>_SHA256`` and ``<SYS>_LAYOUT``
+  say which version is loaded;
+* one strict-XTCE ``MathAlgorithm`` per axis with the affine part in postfix
+  (``<CAL>_LIN``): exact for the affine methods, the network's affine part otherwise (the header
+  says what it drops).
+
+Yamcs cannot do this with calibrators: a calibrator sees one parameter (its XTCE reader refuses
+other parameters inside one), so cross-axis terms need an algorithm.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+
+from orbitcal.export._text import f64, loss_lines
+from orbitcal.export.javascript import INPUT_RAW, OUTPUTS, algorithm_text, hk_inputs
+from orbitcal.export.options import ExportError, ExportOptions
+from orbitcal.export.product import (
+    AffineForm,
+    NetworkForm,
+    ProductInfo,
+    affine_part,
+    is_exact_affine,
+    layout,
+)
+
+__all__ = ["NS", "coefficient_values", "lin_name", "linear_postfix", "render_xtce"]
+
+NS = "http://www.omg.org/spec/XTCE/20180204"
+_T = f"{{{NS}}}"
+
+
+def coefficient_values(
+    form: AffineForm | NetworkForm, info: ProductInfo, options: ExportOptions
+) -> dict[str, float | int | str]:
+    """Local parameter name → value: what the XTCE initialises and ``yamcs-push`` sets.
+
+    The affine part's coefficients (``<SYS>_LIN_*``) feed the MathAlgorithms; for an affine
+    method they equal the JavaScript's (``<SYS>_*``) but are kept apart so that both
+    algorithms read a complete set.
+    """
+    sys_ = options.space_system
+    out: dict[str, float | int | str] = {
+        f"{sys_}_VERSION": info.version,
+        f"{sys_}_SHA256": info.sha256,
+        f"{sys_}_LAYOUT": layout(form),
+    }
+    for name, value in form.coefficients().items():
+        out[f"{sys_}_{name}"] = value
+    for name, value in affine_part(form).coefficients().items():
+        out[f"{sys_}_LIN_{name}"] = value
+    return out
+
+
+def lin_name(cal_name: str) -> str:
+    """The parameter a MathAlgorithm writes for calibrated axis ``cal_name`` (defined here)."""
+    return cal_name.rsplit("/", 1)[-1] + "_LIN"
+
+
+def _sub(parent: ET.Element, tag: str, **attrib: str) -> ET.Element:
+    return ET.SubElement(parent, _T + tag, attrib)
+
+
+def _postfix(op: ET.Element, items: list[tuple[str, str]]) -> None:
+    for kind, value in items:
+        if kind == "param":
+            _sub(op, "ParameterInstanceRefOperand", parameterRef=value)
+        elif kind == "value":
+            e = _sub(op, "ValueOperand")
+            e.text = value
+        else:
+            e = _sub(op, "Operator")
+            e.text = value
+
+
+def linear_postfix(
+    axis: int, raw: tuple[str, str, str], hk: list[str], coef: str
+) -> list[tuple[str, str]]:
+    """Postfix of ``sum_j M[axis, j] * (raw_j - o_j - sum_m K[j, m] * hk_m)``.
+
+    Operands push on a stack; a binary operator pops ``r`` then ``l`` and pushes ``l op r``
+    (Yamcs ``MathOperationCalibratorFactory.getJavaExpression``).
+    """
+    items: list[tuple[str, str]] = []
+    for j in range(3):
+        items += [("param", raw[j]), ("param", f"{coef}O_{j}"), ("op", "-")]
+        for m, name in enumerate(hk):
+            items += [("param", f"{coef}K_{j}_{m}"), ("param", name), ("op", "*"), ("op", "-")]
+        items += [("param", f"{coef}M_{axis}_{j}"), ("op", "*")]
+        if j > 0:
+            items.append(("op", "+"))
+    return items
+
+
+def render_xtce(form: AffineForm | NetworkForm, info: ProductInfo, options: ExportOptions) -> bytes:
+    """The SpaceSystem as UTF-8 XML bytes."""
+    ET.register_namespace("xtce", NS)
+    sys_ = options.space_system
+    exact = is_exact_affine(form)
+    hk_cols = list(form.hk_names)
+    hk_params = [options.hk_parameter(c) for c in hk_cols]
+    names = [*options.raw_names, *hk_params, *options.cal_names]
+    names += [lin_name(n) for n in options.cal_names]
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    if repeated:
+        raise ExportError(
+            f"parameter names must differ; {', '.join(repeated)} named twice "
+            "(raw, housekeeping and calibrated names)",
+            field="hk_names",
+        )
+    root = ET.Element(_T + "SpaceSystem", {"name": sys_})
+    desc = _sub(root, "LongDescription")
+    desc.text = (
+        f"orbitcal magnetometer calibration of {info.spacecraft}, version {info.version} "
+        f"({info.method}). The JavaScript algorithm MagCalibration carries the whole "
+        "calibration; the MathAlgorithms *_LIN carry its affine part."
+    )
+    header = _sub(
+        root,
+        "Header",
+        version=str(info.version),
+        date=info.created_at,
+        classification="NotClassified",
+        validationStatus="Working",
+    )
+    notes = _sub(header, "NoteSet")
+    carries = (
+        "the affine part b_cal = M (b_raw - o - K hk) in the MathAlgorithms *_LIN"
+        if isinstance(form, AffineForm)
+        else "the network's first-order expansion about the centre of its training inputs "
+        "in the MathAlgorithms *_LIN (the JavaScript algorithm carries the whole network)"
+    )
+    for line in info.lines() + loss_lines(
+        info, carries=carries, exact=exact, loss=options.loss, which="affine"
+    ):
+        _sub(notes, "Note").text = line
+    if options.loss is not None:
+        _sub(notes, "Note").text = (
+            f"held-out RMS of the JavaScript algorithm (whole calibration): "
+            f"{options.loss.full_rms_nt:.6g} nT"
+        )
+
+    tm = _sub(root, "TelemetryMetaData")
+    types = _sub(tm, "ParameterTypeSet")
+    field_t = _sub(types, "FloatParameterType", name="MagneticField_nT", sizeInBits="64")
+    _sub(_sub(field_t, "UnitSet"), "Unit").text = "nT"
+    _sub(types, "FloatParameterType", name="Housekeeping", sizeInBits="64")
+    _sub(types, "FloatParameterType", name="Coefficient", sizeInBits="64")
+    _sub(types, "IntegerParameterType", name="Version", sizeInBits="32", signed="false")
+    _sub(types, "StringParameterType", name="Text")
+
+    params = _sub(tm, "ParameterSet")
+
+    def param(name: str, type_ref: str, source: str, initial: str | None = None) -> None:
+        if name.startswith("/"):
+            return  # defined in the mission's MDB
+        attrib = {"name": name, "parameterTypeRef": type_ref}
+        if initial is not None:
+            attrib["initialValue"] = initial
+        p = _sub(params, "Parameter", **attrib)
+        _sub(p, "ParameterProperties", dataSource=source, persistence="true")
+
+    for name in options.raw_names:
+        param(name, "MagneticField_nT", "telemetered")
+    for name in hk_params:
+        param(name, "Housekeeping", "telemetered")
+    for name in options.cal_names:
+        param(name, "MagneticField_nT", "derived")
+        param(lin_name(name), "MagneticField_nT", "derived")
+    values = coefficient_values(form, info, options)
+    for name, value in values.items():
+        if isinstance(value, str):
+            param(name, "Text", "local", value)
+        elif isinstance(value, int):
+            param(name, "Version", "local", str(value))
+        else:
+            param(name, "Coefficient", "local", f64(value))
+
+    algos = _sub(tm, "AlgorithmSet")
+    custom = _sub(algos, "CustomAlgorithm", name="MagCalibration")
+    text = _sub(custom, "AlgorithmText", language="JavaScript")
+    text.text = algorithm_text(
+        form, [f"orbitcal: {info.spacecraft} v{info.version} {info.method} sha256 {info.sha256}"]
+    )
+    inputs = _sub(custom, "InputSet")
+    for name, in_name in zip(options.raw_names, INPUT_RAW, strict=True):
+        _sub(inputs, "InputParameterInstanceRef", parameterRef=name, inputName=in_name)
+    for name, in_name in zip(hk_params, hk_inputs(len(hk_params)), strict=True):
+        _sub(inputs, "InputParameterInstanceRef", parameterRef=name, inputName=in_name)
+    for coef in form.coefficients():
+        _sub(inputs, "InputParameterInstanceRef", parameterRef=f"{sys_}_{coef}", inputName=coef)
+    outputs = _sub(custom, "OutputSet")
+    for name, out_name in zip(options.cal_names, OUTPUTS, strict=True):
+        _sub(outputs, "OutputParameterRef", parameterRef=name, outputName=out_name)
+    triggers = _sub(custom, "TriggerSet")
+    for name in options.raw_names:
+        _sub(triggers, "OnParameterUpdateTrigger", parameterRef=name)
+
+    for axis, name in enumerate(options.cal_names):
+        algo = _sub(algos, "MathAlgorithm", name=f"{lin_name(name)}_ALGORITHM")
+        op = _sub(algo, "MathOperation", outputParameterRef=lin_name(name))
+        _postfix(op, linear_postfix(axis, options.raw_names, hk_params, f"{sys_}_LIN_"))
+        trig = _sub(op, "TriggerSet")
+        for raw in options.raw_names:
+            _sub(trig, "OnParameterUpdateTrigger", parameterRef=raw)
+
+    ET.indent(root, space="  ")
+    body = ET.tostring(root, encoding="unicode")
+    return ('<?xml version="1.0" encoding="UTF-8"?>\n' + body + "\n").encode("utf-8")
