@@ -125,7 +125,7 @@ def test_out_of_range_retrain_parameters_and_schedules_are_422_naming_the_field(
 
 
 def test_params_resolve_once_request_over_schedule_over_settings() -> None:
-    settings = Settings(window_s=3600.0, method="linear", min_samples=50, _env_file=None)
+    settings = Settings(window_s=3600.0, method="linear", min_samples=50)
     p = RetrainParams.resolve(settings, schedule=Schedule(window_s=7200.0), overrides={"seed": 3})
     assert (p.window_s, p.seed, p.min_samples, p.method) == (7200.0, 3, 50, "linear")
     hourly = Schedule(window_s=7200.0)
