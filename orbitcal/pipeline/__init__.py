@@ -20,6 +20,7 @@ methods, which cannot see a rotation of the sensor axes, it is the RMS of ``‖b
 
 from __future__ import annotations
 
+from orbitcal.pipeline.determination import UndeterminedError
 from orbitcal.pipeline.diagnosis import diagnose
 from orbitcal.pipeline.fitting import CalibrationRun, calibrate, calibrate_telemetry, fit_document
 from orbitcal.pipeline.inputs import fit_data_for_telemetry, orbit_from
@@ -68,6 +69,7 @@ __all__ = [
     "RowSelection",
     "Scores",
     "TrainingRows",
+    "UndeterminedError",
     "Window",
     "apply_document",
     "calibrate",

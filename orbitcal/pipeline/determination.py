@@ -14,8 +14,9 @@ from __future__ import annotations
 import numpy as np
 
 from orbitcal.arrays import FloatArray
+from orbitcal.errors import NotEnoughDataError
 
-__all__ = ["MAX_CONDITION", "MIN_SPREAD_FRACTION", "undetermined_reason"]
+__all__ = ["MAX_CONDITION", "MIN_SPREAD_FRACTION", "UndeterminedError", "undetermined_reason"]
 
 #: Readings whose principal spreads differ by more than this factor (largest / smallest) leave
 #: one direction numerically undetermined [-]. A nadir-pointing LEO spacecraft's field varies
@@ -24,6 +25,11 @@ MAX_CONDITION = 1e6
 #: Readings whose largest RMS spread about their mean is below this fraction of their RMS
 #: magnitude do not vary at all (a stuck sensor) [-].
 MIN_SPREAD_FRACTION = 1e-9
+
+
+class UndeterminedError(NotEnoughDataError):
+    """The raw readings cannot determine a calibration (no variation, or not in 3 directions);
+    collect data over more of the orbit, or check the sensor (exit 3, HTTP 422)."""
 
 
 def undetermined_reason(b_raw_nt: FloatArray) -> str | None:

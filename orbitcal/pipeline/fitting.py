@@ -17,6 +17,7 @@ from orbitcal.calibrate import METHODS, Calibration, FitData, MissingAttitudeErr
 from orbitcal.calibrate.document import calibration_to_document
 from orbitcal.calibrate.errors import TooFewSamplesError, UnknownMethodError
 from orbitcal.calibrate.holdout import later_block_split
+from orbitcal.pipeline.determination import UndeterminedError, undetermined_reason
 from orbitcal.pipeline.inputs import fit_data_for_telemetry
 from orbitcal.pipeline.scores import Scores, score
 from orbitcal.telemetry import Telemetry
@@ -74,6 +75,7 @@ def calibrate(
     spacecraft: str = "",
     version: int = 1,
     progress: Callable[[int, float], None] | None = None,
+    refuse_undetermined: bool = True,
     **method_options: Any,
 ) -> CalibrationRun:
     """Fit ``method`` on the earlier blocks of ``telemetry`` and score it on the later ones.
@@ -96,6 +98,8 @@ def calibrate(
         Seeds the fit (initial network weights).
     spacecraft, version
         Written into the document (the service fills its own).
+    refuse_undetermined
+        Raise :class:`UndeterminedError` for raw readings that cannot determine a calibration.
     progress
         ``progress(epoch, mse)`` during iterative fits.
     **method_options
@@ -113,6 +117,10 @@ def calibrate(
     ------
     UnknownMethodError, MissingAttitudeError, TooFewSamplesError, PoorCoverageError
         From the calibrator; ``ValueError`` from the truth pipeline (no positions and no orbit).
+    UndeterminedError
+        The raw readings of the fitted rows cannot determine a calibration (a stuck sensor, a
+        dead axis: :func:`orbitcal.pipeline.determination.undetermined_reason`), unless
+        ``refuse_undetermined`` is False (a retraining fits anyway and records the refusal).
     """
     import torch
 
@@ -128,6 +136,9 @@ def calibrate(
         tel, orbit=orbit, field=field, attitude_frame=attitude_frame
     )
     train, hold = later_block_split(tel.t_utc_s, holdout_fraction)
+    why = undetermined_reason(data.b_raw_nt[train]) if refuse_undetermined else None
+    if why is not None:
+        raise UndeterminedError(f"{method}: the data cannot determine a calibration: {why}")
     generator = torch.Generator().manual_seed(int(rng.integers(0, 2**62)))
     cal = fit_method(
         method, data.subset(train), generator=generator, callback=progress, **method_options
@@ -194,5 +205,6 @@ def fit_document(
             attitude_frame=attitude_frame,
             holdout_fraction=holdout_fraction,
             rng=rng,
+            refuse_undetermined=False,  # retrain() refuses it after scoring, saying why
         ).document
     )

@@ -151,6 +151,8 @@ def retrain(
     """
     from orbitcal.timescales import utc_s_to_iso
 
+    if len(telemetry) == 0:
+        raise NotEnoughDataError("a retraining needs telemetry: the table is empty")
     tel = telemetry.sort_by_time()
     truth_all, _ = fit_data_for_telemetry(
         tel, orbit=orbit, field=options.field, attitude_frame=options.attitude_frame
