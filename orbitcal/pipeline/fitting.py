@@ -136,13 +136,15 @@ def calibrate(
         tel, orbit=orbit, field=field, attitude_frame=attitude_frame
     )
     train, hold = later_block_split(tel.t_utc_s, holdout_fraction)
-    why = undetermined_reason(data.b_raw_nt[train]) if refuse_undetermined else None
-    if why is not None:
-        raise UndeterminedError(f"{method}: the data cannot determine a calibration: {why}")
     generator = torch.Generator().manual_seed(int(rng.integers(0, 2**62)))
     cal = fit_method(
         method, data.subset(train), generator=generator, callback=progress, **method_options
     )
+    # after the method's own checks (sample counts, coverage of the reference field), which name
+    # the more specific cause
+    why = undetermined_reason(data.b_raw_nt[train]) if refuse_undetermined else None
+    if why is not None:
+        raise UndeterminedError(f"{method}: the data cannot determine a calibration: {why}")
     train_scores = score(cal, truth=data, rows=train)
     hold_scores = score(cal, truth=data, rows=hold) if np.any(hold) else train_scores
     metrics: dict[str, float] = {

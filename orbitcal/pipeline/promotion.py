@@ -179,55 +179,106 @@ def decide_promotion(
         The same squared residual of the uncalibrated readings; compared with when no champion
         is; None skips that comparison (the challenger is promoted, as before issue 24).
     """
-    rule = rule or PromotionRule()
-    margin, alpha = rule.margin, rule.alpha
-    ch_rms = float(np.sqrt(np.mean(challenger_sq_nt2)))
-    where = f" on {span}" if span else ""
+    judge = _Judge(
+        metric=metric,
+        challenger_sq_nt2=challenger_sq_nt2,
+        rule=rule or PromotionRule(),
+        where=f" on {span}" if span else "",
+    )
+    if champion_sq_nt2 is not None:
+        return judge.versus_champion(champion_sq_nt2, champion_version)
+    if champion_problem is None:
+        name, said = "first calibration", "first calibration of this spacecraft"
+    else:
+        name = "champion cannot be scored"
+        said = (
+            f"version {champion_version} in service cannot be scored on the new data "
+            f"({champion_problem}); held-out {metric} {judge.ch_rms:.3f} nT"
+        )
+    if identity_sq_nt2 is None:
+        return judge.decided(True, name, said)
+    return judge.versus_identity(identity_sq_nt2, name, said)
+
+
+@dataclass(frozen=True)
+class _Judge:
+    """One challenger's held-out residuals, judged against a champion or the identity."""
+
+    metric: str
+    challenger_sq_nt2: FloatArray
+    rule: PromotionRule
+    where: str
+
+    @property
+    def ch_rms(self) -> float:
+        return float(np.sqrt(np.mean(self.challenger_sq_nt2)))
 
     def decided(
+        self,
         promote: bool,
         rule_name: str,
         reason: str,
         contest: _Contest | None = None,
         *,
-        versus_identity: bool = False,
+        identity: bool = False,
     ) -> Promotion:
         return Promotion(
             promote=promote,
             rule=rule_name,
             reason=reason,
-            metric=metric,
-            challenger_rms_nt=ch_rms,
-            champion_rms_nt=None if contest is None or versus_identity else contest.other_rms_nt,
+            metric=self.metric,
+            challenger_rms_nt=self.ch_rms,
+            champion_rms_nt=None if contest is None or identity else contest.other_rms_nt,
             gain=None if contest is None else contest.gain,
             p_value=None if contest is None else contest.p_value,
-            margin=margin,
-            alpha=alpha,
-            n_chunks=rule.n_chunks,
-            identity_rms_nt=contest.other_rms_nt if contest and versus_identity else None,
+            margin=self.rule.margin,
+            alpha=self.rule.alpha,
+            n_chunks=self.rule.n_chunks,
+            identity_rms_nt=contest.other_rms_nt if contest is not None and identity else None,
         )
 
-    if champion_sq_nt2 is None:
-        first = champion_problem is None
-        name = "first calibration" if first else "champion cannot be scored"
-        said = (
-            "first calibration of this spacecraft"
-            if first
-            else f"version {champion_version} in service cannot be scored on the new data "
-            f"({champion_problem}); held-out {metric} {ch_rms:.3f} nT"
+    def versus_champion(self, champion_sq_nt2: FloatArray, version: int | None) -> Promotion:
+        c = _contest(self.challenger_sq_nt2, champion_sq_nt2, self.rule)
+        margin, alpha, ch = self.rule.margin, self.rule.alpha, self.ch_rms
+        head = f"held-out {self.metric} {ch:.3f} nT"
+        versus = f"version {version}'s {c.other_rms_nt:.3f} nT"
+        if c.p_value is None:
+            return self.decided(
+                False,
+                "margin",
+                f"{head} does not beat {versus} in service{self.where} "
+                f"(gain {100 * c.gain:.2f} %, needs > {100 * margin:g} %)",
+                c,
+            )
+        if c.won:
+            return self.decided(
+                True,
+                "margin and significance",
+                f"{head} beats {versus}{self.where} (gain {100 * c.gain:.2f} % > "
+                f"{100 * margin:g} %, p = {c.p_value:.2g} < {alpha:g})",
+                c,
+            )
+        return self.decided(
+            False,
+            "significance",
+            f"{head} does not beat {versus} in service{self.where} significantly (gain "
+            f"{100 * c.gain:.2f} %, p = {c.p_value:.2g} >= {alpha:g} over {c.n_chunks} chunks)",
+            c,
         )
-        if identity_sq_nt2 is None:
-            return decided(True, name, said)
-        c = _contest(challenger_sq_nt2, identity_sq_nt2, rule)
+
+    def versus_identity(self, identity_sq_nt2: FloatArray, name: str, said: str) -> Promotion:
+        c = _contest(self.challenger_sq_nt2, identity_sq_nt2, self.rule)
+        margin, alpha = self.rule.margin, self.rule.alpha
+        head = f"held-out {self.metric} {self.ch_rms:.3f} nT"
         versus = f"the uncalibrated readings' {c.other_rms_nt:.3f} nT"
         if c.won:
-            return decided(
+            return self.decided(
                 True,
                 name,
-                f"{said}: held-out {metric} {ch_rms:.3f} nT beats {versus}{where} "
+                f"{said}: {head} beats {versus}{self.where} "
                 f"(gain {100 * c.gain:.2f} %, p = {c.p_value:.2g} < {alpha:g})",
                 c,
-                versus_identity=True,
+                identity=True,
             )
         how = (
             f"(gain {100 * c.gain:.2f} %, needs > {100 * margin:g} %)"
@@ -235,40 +286,14 @@ def decide_promotion(
             else f"significantly (gain {100 * c.gain:.2f} %, p = {c.p_value:.2g} >= {alpha:g} "
             f"over {c.n_chunks} chunks)"
         )
-        return decided(
+        return self.decided(
             False,
             "identity",
-            f"held-out {metric} {ch_rms:.3f} nT does not beat {versus}{where} {how}: "
+            f"{head} does not beat {versus}{self.where} {how}: "
             "a calibration no better than none is not put in service",
             c,
-            versus_identity=True,
+            identity=True,
         )
-    c = _contest(challenger_sq_nt2, champion_sq_nt2, rule)
-    versus = f"version {champion_version}'s {c.other_rms_nt:.3f} nT"
-    if c.p_value is None:
-        return decided(
-            False,
-            "margin",
-            f"held-out {metric} {ch_rms:.3f} nT does not beat {versus} in service{where} "
-            f"(gain {100 * c.gain:.2f} %, needs > {100 * margin:g} %)",
-            c,
-        )
-    if c.won:
-        return decided(
-            True,
-            "margin and significance",
-            f"held-out {metric} {ch_rms:.3f} nT beats {versus}{where} "
-            f"(gain {100 * c.gain:.2f} % > {100 * margin:g} %, p = {c.p_value:.2g} < {alpha:g})",
-            c,
-        )
-    return decided(
-        False,
-        "significance",
-        f"held-out {metric} {ch_rms:.3f} nT does not beat {versus} in service{where} "
-        f"significantly (gain {100 * c.gain:.2f} %, p = {c.p_value:.2g} >= {alpha:g} over "
-        f"{c.n_chunks} chunks)",
-        c,
-    )
 
 
 def refuse_undetermined(
