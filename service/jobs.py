@@ -31,6 +31,7 @@ from orbitcal.pipeline import (
     Champion,
     PromotionRule,
     RetrainOptions,
+    RowRules,
     TrainingRows,
     orbit_from,
     retrain,
@@ -168,12 +169,14 @@ def _read_inputs(
         samples.t_utc_s,
         has_attitude=samples.has("q_w", "q_x", "q_y", "q_z"),
         has_position=samples.has("r_x", "r_y", "r_z"),
-        method=params.method,
-        have_orbit=bool(sc.tle or sc.omm),
-        min_samples=params.min_samples,
+        rules=RowRules(
+            method=params.method,
+            have_orbit=bool(sc.tle or sc.omm),
+            min_samples=params.min_samples,
+            quiet_kp_max=settings.quiet_kp_max,
+            quiet_dst_min_nt=settings.quiet_dst_min_nt,
+        ),
         spacecraft=sc.id,
-        quiet_kp_max=settings.quiet_kp_max,
-        quiet_dst_min_nt=settings.quiet_dst_min_nt,
     )
     return samples.select(rows.mask).to_telemetry(), rows, window, champion
 

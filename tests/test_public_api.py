@@ -102,6 +102,7 @@ PUBLIC: dict[str, list[str]] = {
         "reference_field_provenance",
     ],
     "orbitcal.pipeline": [
+        "CalibrateOptions",
         "CalibrationRun",
         "Champion",
         "EXCLUSION_REASONS",
@@ -114,6 +115,7 @@ PUBLIC: dict[str, list[str]] = {
         "PromotionRule",
         "RetrainOptions",
         "Retraining",
+        "RowRules",
         "RowSelection",
         "Scores",
         "TrainingRows",

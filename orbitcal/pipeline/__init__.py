@@ -22,7 +22,13 @@ from __future__ import annotations
 
 from orbitcal.pipeline.determination import UndeterminedError
 from orbitcal.pipeline.diagnosis import diagnose
-from orbitcal.pipeline.fitting import CalibrationRun, calibrate, calibrate_telemetry, fit_document
+from orbitcal.pipeline.fitting import (
+    CalibrateOptions,
+    CalibrationRun,
+    calibrate,
+    calibrate_telemetry,
+    fit_document,
+)
 from orbitcal.pipeline.inputs import fit_data_for_telemetry, orbit_from
 from orbitcal.pipeline.promotion import (
     PROMOTE_ALPHA,
@@ -42,6 +48,7 @@ from orbitcal.pipeline.retraining import (
 from orbitcal.pipeline.rows import (
     EXCLUSION_REASONS,
     FUTURE_TOLERANCE_S,
+    RowRules,
     RowSelection,
     TrainingRows,
     Window,
@@ -59,6 +66,7 @@ __all__ = [
     "PROMOTE_ALPHA",
     "PROMOTE_CHUNKS",
     "PROMOTE_MARGIN",
+    "CalibrateOptions",
     "CalibrationRun",
     "Champion",
     "FitFunction",
@@ -66,6 +74,7 @@ __all__ = [
     "PromotionRule",
     "RetrainOptions",
     "Retraining",
+    "RowRules",
     "RowSelection",
     "Scores",
     "TrainingRows",

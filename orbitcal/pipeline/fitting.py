@@ -6,8 +6,9 @@ The fit sees only the earlier time blocks; ``metrics.holdout_rms_nt`` is measure
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, fields
+from dataclasses import field as dataclass_field
 from typing import Any
 
 import numpy as np
@@ -22,7 +23,13 @@ from orbitcal.pipeline.inputs import fit_data_for_telemetry
 from orbitcal.pipeline.scores import Scores, score
 from orbitcal.telemetry import Telemetry
 
-__all__ = ["CalibrationRun", "calibrate", "calibrate_telemetry", "fit_document"]
+__all__ = [
+    "CalibrateOptions",
+    "CalibrationRun",
+    "calibrate",
+    "calibrate_telemetry",
+    "fit_document",
+]
 
 
 @dataclass(frozen=True)
@@ -63,22 +70,47 @@ class CalibrationRun:
         )
 
 
+@dataclass(frozen=True)
+class CalibrateOptions:
+    """How :func:`calibrate` fits and scores (one typed object instead of a keyword list)."""
+
+    #: A name of :data:`orbitcal.calibrate.METHODS`.
+    method: str = "lmbp-hk"
+    #: Reference field model.
+    field: str = "IGRF-14"
+    #: ``"GCRS"`` or ``"ITRS"``: the frame of the table's quaternions.
+    attitude_frame: str = "GCRS"
+    #: Share of the latest samples held out for ``metrics.holdout_rms_nt`` [-].
+    holdout_fraction: float = 0.25
+    #: Written into the document (the service fills its own).
+    spacecraft: str = ""
+    version: int = 1
+    #: Raise :class:`UndeterminedError` for raw readings that cannot determine a calibration
+    #: (False: fit anyway; a retraining records the refusal itself).
+    refuse_undetermined: bool = True
+    #: Passed to the calibrator (e.g. ``n_hidden``, ``restarts``, ``max_epochs``).
+    method_options: Mapping[str, Any] = dataclass_field(default_factory=dict)
+
+    @classmethod
+    def from_keywords(cls, **keywords: Any) -> CalibrateOptions:
+        """The options named as keywords; other keywords are the method's options."""
+        own = {f.name for f in fields(cls)} - {"method_options"}
+        return cls(
+            **{k: v for k, v in keywords.items() if k in own},
+            method_options={k: v for k, v in keywords.items() if k not in own},
+        )
+
+
 def calibrate(
     telemetry: Telemetry,
     *,
     orbit: Any = None,
-    method: str = "lmbp-hk",
-    field: str = "IGRF-14",
-    attitude_frame: str = "GCRS",
-    holdout_fraction: float = 0.25,
     rng: np.random.Generator,
-    spacecraft: str = "",
-    version: int = 1,
+    options: CalibrateOptions | None = None,
     progress: Callable[[int, float], None] | None = None,
-    refuse_undetermined: bool = True,
-    **method_options: Any,
+    **keywords: Any,
 ) -> CalibrationRun:
-    """Fit ``method`` on the earlier blocks of ``telemetry`` and score it on the later ones.
+    """Fit a method on the earlier blocks of ``telemetry`` and score it on the later ones.
 
     Parameters
     ----------
@@ -86,24 +118,16 @@ def calibrate(
         Validated table (UTC times); positions from its ``r_x, r_y, r_z`` or from ``orbit``.
     orbit
         An :class:`orbitcal.orbit.Orbit` (TLE/OMM), needed when the table has no positions.
-    method
-        A name of :data:`orbitcal.calibrate.METHODS`.
-    field
-        Reference field model (default IGRF-14).
-    attitude_frame
-        ``"GCRS"`` or ``"ITRS"``: the frame of the table's quaternions.
-    holdout_fraction
-        Share of the latest samples held out for ``metrics.holdout_rms_nt``.
     rng
         Seeds the fit (initial network weights).
-    spacecraft, version
-        Written into the document (the service fills its own).
-    refuse_undetermined
-        Raise :class:`UndeterminedError` for raw readings that cannot determine a calibration.
+    options
+        Method, field, attitude frame, hold-out share, document names, method options
+        (:class:`CalibrateOptions`).
     progress
         ``progress(epoch, mse)`` during iterative fits.
-    **method_options
-        Passed to the calibrator (e.g. ``n_hidden``, ``restarts``, ``max_epochs``).
+    **keywords
+        Instead of ``options``: its fields as keywords (``method="linear"``), any other keyword
+        being a method option (:meth:`CalibrateOptions.from_keywords`).
 
     Returns
     -------
@@ -120,8 +144,13 @@ def calibrate(
     UndeterminedError
         The raw readings of the fitted rows cannot determine a calibration (a stuck sensor, a
         dead axis: :func:`orbitcal.pipeline.determination.undetermined_reason`), unless
-        ``refuse_undetermined`` is False (a retraining fits anyway and records the refusal).
+        ``options.refuse_undetermined`` is False.
     """
+    if options is not None and keywords:
+        raise TypeError("calibrate() takes options or keywords, not both")
+    opts = options if options is not None else CalibrateOptions.from_keywords(**keywords)
+    method, field, attitude_frame = opts.method, opts.field, opts.attitude_frame
+    holdout_fraction = opts.holdout_fraction
     import torch
 
     if method not in METHODS:
@@ -138,11 +167,11 @@ def calibrate(
     train, hold = later_block_split(tel.t_utc_s, holdout_fraction)
     generator = torch.Generator().manual_seed(int(rng.integers(0, 2**62)))
     cal = fit_method(
-        method, data.subset(train), generator=generator, callback=progress, **method_options
+        method, data.subset(train), generator=generator, callback=progress, **opts.method_options
     )
     # after the method's own checks (sample counts, coverage of the reference field), which name
     # the more specific cause
-    why = undetermined_reason(data.b_raw_nt[train]) if refuse_undetermined else None
+    why = undetermined_reason(data.b_raw_nt[train]) if opts.refuse_undetermined else None
     if why is not None:
         raise UndeterminedError(f"{method}: the data cannot determine a calibration: {why}")
     train_scores = score(cal, truth=data, rows=train)
@@ -159,8 +188,8 @@ def calibrate(
         metrics["holdout_norm_rms_nt"] = hold_scores.norm_rms_nt
     document = calibration_to_document(
         cal,
-        spacecraft=spacecraft,
-        version=version,
+        spacecraft=opts.spacecraft,
+        version=opts.version,
         reference_field=field_name,
         t_start_utc_s=float(tel.t_utc_s[0]),
         t_end_utc_s=float(tel.t_utc_s[-1]),
@@ -202,11 +231,13 @@ def fit_document(
         calibrate(
             telemetry,
             orbit=orbit,
-            method=method,
-            field=field,
-            attitude_frame=attitude_frame,
-            holdout_fraction=holdout_fraction,
             rng=rng,
-            refuse_undetermined=False,  # retrain() refuses it after scoring, saying why
+            options=CalibrateOptions(
+                method=method,
+                field=field,
+                attitude_frame=attitude_frame,
+                holdout_fraction=holdout_fraction,
+                refuse_undetermined=False,  # retrain() refuses it after scoring, saying why
+            ),
         ).document
     )

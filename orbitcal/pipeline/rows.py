@@ -18,6 +18,7 @@ __all__ = [
     "FUTURE_TOLERANCE_S",
     "OUTLIER_FRACTION",
     "OUTLIER_SIGMAS",
+    "RowRules",
     "RowSelection",
     "TrainingRows",
     "Window",
@@ -176,18 +177,29 @@ class TrainingRows:
         }
 
 
+@dataclass(frozen=True)
+class RowRules:
+    """What a retraining's rows must satisfy (:func:`training_rows`)."""
+
+    #: The calibration method (vector methods need attitude).
+    method: str
+    #: Rows without positions take them from a TLE/OMM.
+    have_orbit: bool
+    #: Fewer usable rows fail the retraining.
+    min_samples: int
+    #: Quiet-time thresholds (:func:`orbitcal.auxdata.quiet_selection`) [-, nT]; None: off.
+    quiet_kp_max: float | None = None
+    quiet_dst_min_nt: float | None = None
+
+
 def training_rows(
     window: Window,
     t_utc_s: NDArray[np.float64],
     *,
     has_attitude: BoolArray,
     has_position: BoolArray,
-    method: str,
-    have_orbit: bool,
-    min_samples: int,
+    rules: RowRules,
     spacecraft: str = "",
-    quiet_kp_max: float | None = None,
-    quiet_dst_min_nt: float | None = None,
 ) -> TrainingRows:
     """Which rows of a window a retraining fits: :func:`usable_rows`, then quiet time.
 
@@ -197,21 +209,19 @@ def training_rows(
         The window (:func:`training_window`), whose exclusions are carried over.
     t_utc_s, has_attitude, has_position : ndarray, shape (N,)
         The window's rows.
-    method
-        The calibration method (vector methods need attitude).
-    have_orbit
-        Rows without positions take them from a TLE/OMM.
-    min_samples
-        Fewer usable rows fail the retraining.
-    quiet_kp_max, quiet_dst_min_nt
-        Quiet-time thresholds (:func:`orbitcal.auxdata.quiet_selection`); None: off.
+    rules
+        Method, orbit, minimum count and quiet-time thresholds.
+    spacecraft
+        Named in the error.
 
     Raises
     ------
     NotEnoughDataError
-        No usable window, or fewer than ``min_samples`` usable rows; the message counts the rows
-        left out and says why.
+        No usable window, or fewer than ``rules.min_samples`` usable rows; the message counts the
+        rows left out and says why.
     """
+    method, min_samples = rules.method, rules.min_samples
+    quiet_kp_max, quiet_dst_min_nt = rules.quiet_kp_max, rules.quiet_dst_min_nt
     if window.end_utc_s is None:
         detail = f" ({describe_exclusions(window.excluded)})" if window.excluded else ""
         raise NotEnoughDataError(f"spacecraft {spacecraft} has no usable telemetry yet{detail}")
@@ -219,7 +229,7 @@ def training_rows(
         has_attitude=has_attitude,
         has_position=has_position,
         vector=METHODS[method].vector if method in METHODS else True,
-        have_orbit=have_orbit,
+        have_orbit=rules.have_orbit,
     )
     mask, excluded = rows.mask, {**window.excluded, **rows.excluded}
     quiet = None
