@@ -89,6 +89,10 @@ def check_field_name(name: str) -> str:
     return name
 
 
+#: Stored schedules already warned about: (spacecraft, fields).
+_WARNED: set[tuple[str, tuple[str, ...]]] = set()
+
+
 class Schedule(BaseModel):
     """A spacecraft's overrides of the retraining schedule, as stored (``None``: the setting)."""
 
@@ -109,10 +113,13 @@ class Schedule(BaseModel):
             return cls.model_validate(stored)
         except ValidationError as exc:
             bad = {str(e["loc"][0]) for e in exc.errors() if e.get("loc")}
-            log.warning(
-                "stored schedule out of bounds: the settings apply instead",
-                extra={"spacecraft": str(spacecraft), "fields": sorted(bad)},
-            )
+            key = (str(spacecraft), tuple(sorted(bad)))
+            if key not in _WARNED:  # once per process, not on every scheduler tick
+                _WARNED.add(key)
+                log.warning(
+                    "stored schedule out of bounds: the settings apply instead",
+                    extra={"spacecraft": str(spacecraft), "fields": sorted(bad)},
+                )
             kept = {k: v for k, v in stored.items() if k not in bad and k in cls.model_fields}
             return cls.model_validate(kept)
 

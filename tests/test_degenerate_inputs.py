@@ -63,8 +63,11 @@ def _print_table() -> Iterator[None]:
 
 def _outcome(entry: str, case: str, call: Callable[[], Any]) -> str:
     try:
-        call()
-        outcome = "ok"
+        result = call()
+        promotion = getattr(result, "promotion", None)
+        outcome = "ok" if promotion is None else f"ok, not promoted: rule {promotion.rule}"
+        if promotion is not None:  # a retraining on data that cannot determine a calibration
+            assert not promotion.promote and promotion.rule == "undetermined", promotion
     except OrbitcalError as exc:
         outcome = f"{type(exc).__name__}: {' '.join(str(exc).split())[:90]}"
     except Exception as exc:  # the defect this test exists for

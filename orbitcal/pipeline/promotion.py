@@ -193,10 +193,11 @@ def decide_promotion(
         name = "champion cannot be scored"
         said = (
             f"version {champion_version} in service cannot be scored on the new data "
-            f"({champion_problem}); held-out {metric} {judge.ch_rms:.3f} nT"
+            f"({champion_problem})"
         )
-    if identity_sq_nt2 is None:
-        return judge.decided(True, name, said)
+    if identity_sq_nt2 is None:  # callers without the identity's residuals: promoted
+        held_out = f"; held-out {metric} {judge.ch_rms:.3f} nT" if champion_problem else ""
+        return judge.decided(True, name, said + held_out)
     return judge.versus_identity(identity_sq_nt2, name, said)
 
 
