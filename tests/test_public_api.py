@@ -156,6 +156,7 @@ PUBLIC: dict[str, list[str]] = {
         "Wang2020Scenario",
         "World",
         "WorldFiles",
+        "WorldOptions",
         "WorldState",
         "attitude_profile",
         "kinematics",

@@ -60,6 +60,7 @@ __all__ = [
     "TleSet",
     "World",
     "WorldFiles",
+    "WorldOptions",
     "WorldState",
     "kinematics",
     "orbital_thermal_cycle_c",
@@ -296,37 +297,16 @@ def _sensor_change_truth(after: SensorModel | None, change_utc_s: float | None) 
     }
 
 
-def simulate_world(
-    tle: TleSet | str,
-    *,
-    start_utc_s: float,
-    duration_s: float,
-    cadence_s: float,
-    rng: np.random.Generator,
-    attitude: AttitudeProfile | None = None,
-    sensor: SensorModel | None = None,
-    sensor_after: SensorModel | None = None,
-    sensor_change_utc_s: float | None = None,
-    effects: Sequence[Effect] = (),
-    field: str = "IGRF-14",
-    housekeeping: Housekeeping | None = None,
-    include_position: bool = False,
-    norad_id: int | None = None,
-    seed: int | None = None,
-) -> World:
-    """Simulate a spacecraft's magnetometer telemetry with known ground truth.
+@dataclass(frozen=True)
+class WorldOptions:
+    """What :func:`simulate_world` simulates (one typed object instead of a keyword list).
 
-    Parameters
+    Attributes
     ----------
-    tle : TleSet or str
-        The element set (or a TLE file's text: the set nearest ``start_utc_s`` is chosen).
     start_utc_s : float
         First sample, POSIX seconds of UTC [s].
     duration_s, cadence_s : float
         Span and sampling interval [s].
-    rng : numpy.random.Generator
-        The one source of randomness (child generators are spawned for the sensor, the
-        housekeeping and each effect in order, so results are reproducible).
     attitude : AttitudeProfile or None
         Default nadir pointing (LVLH).
     sensor : SensorModel or None
@@ -346,11 +326,55 @@ def simulate_world(
         Spacecraft to pick when ``tle`` is a file's text.
     seed : int or None
         Recorded in the truth (the caller made ``rng`` from it).
+    """
+
+    start_utc_s: float
+    duration_s: float
+    cadence_s: float
+    attitude: AttitudeProfile | None = None
+    sensor: SensorModel | None = None
+    sensor_after: SensorModel | None = None
+    sensor_change_utc_s: float | None = None
+    effects: Sequence[Effect] = ()
+    field: str = "IGRF-14"
+    housekeeping: Housekeeping | None = None
+    include_position: bool = False
+    norad_id: int | None = None
+    seed: int | None = None
+
+
+def simulate_world(
+    tle: TleSet | str,
+    *,
+    rng: np.random.Generator,
+    options: WorldOptions | None = None,
+    **keywords: Any,
+) -> World:
+    """Simulate a spacecraft's magnetometer telemetry with known ground truth.
+
+    Parameters
+    ----------
+    tle : TleSet or str
+        The element set (or a TLE file's text: the set nearest ``start_utc_s`` is chosen).
+    rng : numpy.random.Generator
+        The one source of randomness (child generators are spawned for the sensor, the
+        housekeeping and each effect in order, so results are reproducible).
+    options : WorldOptions
+        What to simulate.
+    **keywords
+        Instead of ``options``: its fields as keywords (``start_utc_s=..., duration_s=...``).
 
     Returns
     -------
     World
     """
+    if options is not None and keywords:
+        raise TypeError("simulate_world() takes options or keywords, not both")
+    o = options if options is not None else WorldOptions(**keywords)
+    start_utc_s, duration_s, cadence_s = o.start_utc_s, o.duration_s, o.cadence_s
+    attitude, sensor, housekeeping, effects = o.attitude, o.sensor, o.housekeeping, o.effects
+    sensor_after, sensor_change_utc_s = o.sensor_after, o.sensor_change_utc_s
+    field, include_position, norad_id, seed = o.field, o.include_position, o.norad_id, o.seed
     if duration_s <= 0 or cadence_s <= 0:
         raise BadInputError("duration_s and cadence_s must be positive")
     n = int(np.floor(duration_s / cadence_s + 1e-9))
