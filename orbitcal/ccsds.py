@@ -31,7 +31,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from orbitcal.errors import LimitExceededError, UnreadableInputError, reading_untrusted_input
+from orbitcal.errors import (
+    BadInputError,
+    LimitExceededError,
+    UnreadableInputError,
+    reading_untrusted_input,
+)
 
 __all__ = [
     "DEFAULT_APID",
@@ -316,7 +321,7 @@ def encode_packets(
     t_utc_s = np.asarray(t_utc_s, dtype=np.float64)
     n = t_utc_s.shape[0]
     if not 0 <= apid < 2048:
-        raise ValueError(f"APID {apid} does not fit in 11 bits")
+        raise BadInputError(f"APID {apid} does not fit in 11 bits")
     t_tai_1958 = _utc_s_to_tai_unix(t_utc_s) + TAI_1958_TO_UNIX_S
     coarse = np.floor(t_tai_1958)
     fine = np.rint((t_tai_1958 - coarse) * _FINE_SCALE).astype(np.int64)

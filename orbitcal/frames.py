@@ -35,6 +35,7 @@ import numpy as np
 import numpy.typing as npt
 
 from orbitcal.arrays import FloatArray
+from orbitcal.errors import OutOfRangeError
 from orbitcal.timescales import skyfield_timescale, tables_epoch, tai_minus_utc_s
 
 __all__ = [
@@ -253,10 +254,10 @@ def gcrs_to_itrs_matrix(t_utc_s: npt.ArrayLike, *, step_s: float = _DEFAULT_STEP
     if t.size == 0:
         return np.empty((0, 3, 3))
     if not np.all(np.isfinite(t)):
-        raise ValueError("t_utc_s must be finite (and on or after 1972-01-01)")
+        raise OutOfRangeError("t_utc_s must be finite (and on or after 1972-01-01)")
     tt_s = _tt_s(t)
     if not np.all(np.isfinite(tt_s)):
-        raise ValueError("t_utc_s before 1972-01-01 is outside the leap-second table")
+        raise OutOfRangeError("t_utc_s before 1972-01-01 is outside the leap-second table")
     c, w, delta_t_s = _slow_parts(tt_s, float(step_s))
     assert c is not None
     era = earth_rotation_angle_rad(tt_s - delta_t_s)
@@ -300,7 +301,7 @@ def _ut1_and_w(t: FloatArray, step_s: float) -> tuple[FloatArray, FloatArray | N
     """UT1 as a POSIX-style count [s] and polar motion W (None when W = I)."""
     tt_s = _tt_s(t)
     if not np.all(np.isfinite(tt_s)):
-        raise ValueError("t_utc_s must be finite and on or after 1972-01-01")
+        raise OutOfRangeError("t_utc_s must be finite and on or after 1972-01-01")
     if t.size == 0:
         return tt_s, None
     _, w, delta_t_s = _slow_parts(tt_s, step_s, need_c=False)
@@ -401,7 +402,7 @@ def gcrs_to_teme_matrix(t_utc_s: npt.ArrayLike, *, step_s: float = _DEFAULT_STEP
         return np.empty((0, 3, 3))
     tt_s = _tt_s(t)
     if not np.all(np.isfinite(tt_s)):
-        raise ValueError("t_utc_s must be finite and on or after 1972-01-01")
+        raise OutOfRangeError("t_utc_s must be finite and on or after 1972-01-01")
     c, _, delta_t_s = _slow_parts(tt_s, float(step_s))
     assert c is not None
     t_ut1_s = tt_s - delta_t_s

@@ -23,6 +23,7 @@ import numpy as np
 import numpy.typing as npt
 
 from orbitcal.arrays import FloatArray
+from orbitcal.errors import BadInputError
 
 __all__ = [
     "WANG2020_GROUND_A",
@@ -77,13 +78,13 @@ class SensorModel:
         a = np.asarray(self.a_matrix, dtype=np.float64)
         b0 = np.asarray(self.bias_nt, dtype=np.float64)
         if a.shape != (3, 3):
-            raise ValueError(f"a_matrix must be 3×3, got shape {a.shape}")
+            raise BadInputError(f"a_matrix must be 3×3, got shape {a.shape}")
         if b0.shape != (3,):
-            raise ValueError(f"bias_nt must have shape (3,), got {b0.shape}")
+            raise BadInputError(f"bias_nt must have shape (3,), got {b0.shape}")
         if not np.isfinite(self.noise_std_nt) or self.noise_std_nt < 0:
-            raise ValueError(f"noise_std_nt must be finite and ≥ 0, got {self.noise_std_nt}")
+            raise BadInputError(f"noise_std_nt must be finite and ≥ 0, got {self.noise_std_nt}")
         if abs(np.linalg.det(a)) < 1e-6:
-            raise ValueError("a_matrix is singular: a magnetometer must see every axis")
+            raise BadInputError("a_matrix is singular: a magnetometer must see every axis")
         object.__setattr__(self, "a_matrix", a)
         object.__setattr__(self, "bias_nt", b0)
         object.__setattr__(self, "noise_std_nt", float(self.noise_std_nt))

@@ -504,14 +504,14 @@ def iso_to_utc_s(iso: Sequence[str] | str) -> FloatArray:
 
     Raises
     ------
-    ValueError
+    BadInputError
         Naming the first row that could not be read.
     """
     items = [iso] if isinstance(iso, str) else list(iso)
     t_s, errors = parse_time_values(pd.Series(items, dtype=object))
     if errors:
         row, reason = errors[0]
-        raise ValueError(f"row {row}: {reason}")
+        raise BadInputError(f"row {row}: {reason}", row=row, field="time")
     return t_s
 
 

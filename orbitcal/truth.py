@@ -46,7 +46,7 @@ def _model(field: str | FieldModel) -> FieldModel:
 def _frame(attitude_frame: str) -> str:
     frame = attitude_frame.strip().upper()
     if frame not in ATTITUDE_FRAMES:
-        raise ValueError(
+        raise BadInputError(
             f"unknown attitude frame {attitude_frame!r}; use one of {', '.join(ATTITUDE_FRAMES)}"
         )
     return frame
@@ -56,9 +56,9 @@ def _inputs(t_utc_s: npt.ArrayLike, r_itrs_km: npt.ArrayLike) -> tuple[FloatArra
     t = np.asarray(t_utc_s, dtype=np.float64).reshape(-1)
     r = np.asarray(r_itrs_km, dtype=np.float64).reshape(-1, 3)
     if r.shape[0] != t.shape[0]:
-        raise ValueError(f"{t.shape[0]} times but {r.shape[0]} positions")
+        raise BadInputError(f"{t.shape[0]} times but {r.shape[0]} positions")
     if not (np.all(np.isfinite(t)) and np.all(np.isfinite(r))):
-        raise ValueError("times and positions must be finite")
+        raise BadInputError("times and positions must be finite")
     return t, r
 
 
@@ -120,7 +120,7 @@ def _itrs_to_body(
 ) -> FloatArray:
     q = np.asarray(q_wxyz, dtype=np.float64).reshape(-1, 4)
     if q.shape[0] != t.shape[0]:
-        raise ValueError(f"{t.shape[0]} times but {q.shape[0]} quaternions")
+        raise BadInputError(f"{t.shape[0]} times but {q.shape[0]} quaternions")
     b_frame = itrs_to_gcrs(b_itrs_nt, t) if frame == "GCRS" else b_itrs_nt
     return frame_to_body(b_frame, q)
 

@@ -27,8 +27,18 @@ from sqlalchemy.engine import Engine
 
 import orbitcal
 from orbitcal import pipeline
-from orbitcal.pipeline import TrainingRows, orbit_from, retrain, training_rows
+from orbitcal.pipeline import (
+    Champion,
+    PromotionRule,
+    RetrainOptions,
+    RowRules,
+    TrainingRows,
+    orbit_from,
+    retrain,
+    training_rows,
+)
 from orbitcal.timescales import utc_s_to_iso
+from service.params import RetrainParams, Schedule
 from service.settings import Settings
 from service.storage import (
     Calibration,
@@ -88,28 +98,22 @@ def create_job(
 ) -> tuple[str, bool]:
     """Create a retraining job unless one is already queued or running: ``(job_id, created)``.
 
-    The job's parameters (method, field, window, hold-out share, seed) are resolved here, from
-    ``overrides``, the spacecraft's schedule and the settings, and stored with the job, so that
-    whichever process runs it (thread or Celery worker) fits exactly what was asked.
+    The job's parameters (:class:`service.params.RetrainParams`: method, field, window, hold-out
+    share, minimum samples, seed) are resolved here, once, from ``overrides``, the spacecraft's
+    schedule and the settings, and stored with the job, so that whichever process runs it
+    (thread or Celery worker) fits exactly what was asked.
     """
     now = time.time()
     stale_after_s = settings.lock_timeout_s
     with write_tx(engine) as conn:
-        schedule = (
-            conn.execute(
-                sa.select(Spacecraft.schedule).where(Spacecraft.pk == spacecraft_pk)
-            ).scalar_one_or_none()
-            or {}
+        stored_schedule = conn.execute(
+            sa.select(Spacecraft.schedule).where(Spacecraft.pk == spacecraft_pk)
+        ).scalar_one_or_none()
+        params = RetrainParams.resolve(
+            settings,
+            schedule=Schedule.from_stored(stored_schedule, spacecraft=spacecraft_pk),
+            overrides=overrides,
         )
-        params: dict[str, Any] = {
-            "method": settings.method,
-            "field": settings.reference_field,
-            "window_s": float(schedule.get("window_s") or settings.window_s),
-            "holdout_fraction": settings.holdout_fraction,
-            "min_samples": settings.min_samples,
-            "seed": 0,
-            **(overrides or {}),
-        }
         existing = conn.execute(
             sa.select(Job.id)
             .where(
@@ -130,7 +134,7 @@ def create_job(
                 kind="retrain",
                 trigger=trigger,
                 status="queued",
-                params=params,
+                params=params.stored(),
                 created_at=now,
             )
         )
@@ -143,15 +147,17 @@ def create_job(
 
 
 def _read_inputs(
-    engine: Engine, settings: Settings, params: dict[str, Any], sc: Any
+    engine: Engine, settings: Settings, params: RetrainParams, sc: Any
 ) -> tuple[Any, TrainingRows, Any, Any]:
     """One read transaction: the robust window, its rows to fit (``pipeline.training_rows``)
     and the champion."""
-    window_s = float(params.get("window_s") or settings.window_s)
-    min_samples = int(params.get("min_samples", settings.min_samples))
     with read_tx(engine) as conn:
         window, samples = read_window(
-            conn, sc.pk, window_s=window_s, min_samples=min_samples, now_utc_s=time.time()
+            conn,
+            sc.pk,
+            window_s=params.window_s,
+            min_samples=params.min_samples,
+            now_utc_s=time.time(),
         )
         champion = conn.execute(
             sa.select(Calibration.version, Calibration.document).where(
@@ -163,12 +169,14 @@ def _read_inputs(
         samples.t_utc_s,
         has_attitude=samples.has("q_w", "q_x", "q_y", "q_z"),
         has_position=samples.has("r_x", "r_y", "r_z"),
-        method=str(params.get("method") or settings.method),
-        have_orbit=bool(sc.tle or sc.omm),
-        min_samples=min_samples,
+        rules=RowRules(
+            method=params.method,
+            have_orbit=bool(sc.tle or sc.omm),
+            min_samples=params.min_samples,
+            quiet_kp_max=settings.quiet_kp_max,
+            quiet_dst_min_nt=settings.quiet_dst_min_nt,
+        ),
         spacecraft=sc.id,
-        quiet_kp_max=settings.quiet_kp_max,
-        quiet_dst_min_nt=settings.quiet_dst_min_nt,
     )
     return samples.select(rows.mask).to_telemetry(), rows, window, champion
 
@@ -176,56 +184,35 @@ def _read_inputs(
 def _retrain(
     engine: Engine, settings: Settings, job: Any, sc: Any, fit: FitFunction
 ) -> dict[str, Any]:
-    params = dict(job.params)
-    method = str(params.get("method") or settings.method)
-    field = str(params.get("field") or settings.reference_field)
-    holdout_fraction = float(params.get("holdout_fraction", settings.holdout_fraction))
+    params = RetrainParams.from_stored(dict(job.params), settings)
     telemetry, selection, window, champion = _read_inputs(engine, settings, params, sc)
     outcome = retrain(
         telemetry,
         orbit=orbit_from(sc.tle, sc.omm),
-        champion=None if champion is None else champion.document,
-        champion_version=None if champion is None else champion.version,
-        method=method,
-        field=field,
-        attitude_frame=sc.attitude_frame,
-        holdout_fraction=holdout_fraction,
-        rng=np.random.default_rng(int(params.get("seed", 0))),
+        champion=None if champion is None else Champion(champion.document, champion.version),
+        options=RetrainOptions(
+            method=params.method,
+            field=params.field,
+            attitude_frame=sc.attitude_frame,
+            holdout_fraction=params.holdout_fraction,
+            rule=PromotionRule(margin=settings.promote_margin, alpha=settings.promote_alpha),
+        ),
+        rng=np.random.default_rng(params.seed),
         fit=fit,
-        margin=settings.promote_margin,
-        alpha=settings.promote_alpha,
     )
     document, decision = outcome.document, outcome.promotion
     rows = selection.summary(extra=outcome.excluded)
-    n = rows["used"]
-    span = utc_s_to_iso([outcome.holdout_start_utc_s, outcome.holdout_end_utc_s])
     provenance = {
         "job_id": job.id,
         "trigger": job.trigger,
         "code_version": code_version(),
-        "method": document.get("method", method),
-        "reference_field": document.get("reference_field", field),
-        "attitude_frame": sc.attitude_frame,
         "orbit": "tle" if sc.tle else ("omm" if sc.omm else "telemetry positions"),
-        "window_s": float(params.get("window_s") or settings.window_s),
+        "window_s": params.window_s,
         "window": {
             "start": utc_s_to_iso([float(window.start_utc_s)])[0],
             "end": utc_s_to_iso([float(window.end_utc_s)])[0],
         },
-        "data": {
-            "start": utc_s_to_iso([float(telemetry.t_utc_s[0])])[0],
-            "end": utc_s_to_iso([float(telemetry.t_utc_s[-1])])[0],
-            "n": n,
-        },
-        "rows": rows,
-        "comparison": {
-            "holdout_start": span[0],
-            "holdout_end": span[1],
-            "holdout_n": outcome.n_holdout,
-            "champion_version": None if champion is None else champion.version,
-            **decision.as_dict(),
-        },
-        "metrics": document.get("metrics", {}),
+        **outcome.provenance(rows=rows),
     }
     now = time.time()
     with write_tx(engine) as conn:
@@ -275,6 +262,7 @@ def _retrain(
         "metric": decision.metric,
         "holdout_rms_nt": decision.challenger_rms_nt,
         "champion_rms_nt": decision.champion_rms_nt,
+        "identity_rms_nt": decision.identity_rms_nt,
         "p_value": decision.p_value,
         "rows": rows,
     }

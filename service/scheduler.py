@@ -17,6 +17,7 @@ from apscheduler.schedulers.background import BackgroundScheduler
 from sqlalchemy.engine import Engine
 
 from service.jobs import JobRunner, create_job, reap_abandoned
+from service.params import Schedule
 from service.settings import Settings
 from service.storage import Job, Spacecraft, read_tx
 
@@ -42,9 +43,9 @@ def due_spacecraft(engine: Engine, settings: Settings, *, now: float) -> list[in
         ).all()
     due = []
     for pk, count, at_last, last_at, schedule in rows:
-        schedule = schedule or {}
-        cadence = float(schedule.get("cadence_s", settings.cadence_s))
-        min_new = int(schedule.get("min_new_samples", settings.min_new_samples))
+        plan = Schedule.from_stored(schedule, spacecraft=pk)
+        cadence = settings.cadence_s if plan.cadence_s is None else plan.cadence_s
+        min_new = settings.min_new_samples if plan.min_new_samples is None else plan.min_new_samples
         if count - at_last < min_new:
             continue
         if last_at is not None and now - last_at < cadence:

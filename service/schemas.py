@@ -7,6 +7,13 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from service.auth import SCOPE_RE, SPACECRAFT_ID_PATTERN
+from service.params import (
+    CADENCE_S_MAX,
+    MIN_NEW_SAMPLES_MAX,
+    SEED_MAX,
+    WINDOW_S_MAX,
+    WINDOW_S_MIN,
+)
 
 __all__ = [
     "ApiKeyCreated",
@@ -48,12 +55,21 @@ class ScheduleIn(BaseModel):
     model_config = ConfigDict(extra="forbid")
     # Finite and bounded: the schedule is stored as JSON (PostgreSQL refused Infinity: a 500) and
     # sample counts are 64-bit.
+    # Bounds: service.params (a value stored now must not fail every later job).
     cadence_s: float | None = Field(
-        default=None, gt=0, allow_inf_nan=False, description="retrain at most this often [s]"
+        default=None,
+        gt=0,
+        le=CADENCE_S_MAX,
+        allow_inf_nan=False,
+        description="retrain at most this often [s], at most 10 years",
     )
-    min_new_samples: int | None = Field(default=None, ge=0, lt=2**63)
+    min_new_samples: int | None = Field(default=None, ge=0, le=MIN_NEW_SAMPLES_MAX)
     window_s: float | None = Field(
-        default=None, gt=0, allow_inf_nan=False, description="sliding window [s]"
+        default=None,
+        ge=WINDOW_S_MIN,
+        le=WINDOW_S_MAX,
+        allow_inf_nan=False,
+        description="sliding window [s], 1 s to 10 years",
     )
 
 
@@ -117,8 +133,14 @@ class IngestResult(BaseModel):
 class RetrainIn(BaseModel):
     model_config = ConfigDict(extra="forbid")
     method: str | None = Field(default=None, max_length=64)
-    window_s: float | None = Field(default=None, gt=0, allow_inf_nan=False)
-    seed: int | None = Field(default=None, ge=0, lt=2**63)
+    window_s: float | None = Field(
+        default=None,
+        ge=WINDOW_S_MIN,
+        le=WINDOW_S_MAX,
+        allow_inf_nan=False,
+        description="sliding window [s], 1 s to 10 years (service.params)",
+    )
+    seed: int | None = Field(default=None, ge=0, le=SEED_MAX)
 
 
 class JobAccepted(BaseModel):

@@ -184,3 +184,33 @@ def test_score_applies_the_full_calibration_not_its_linear_part(hk_world: OrbitW
     no_hk = Telemetry(t_utc_s=tel.t_utc_s, b_raw_nt=tel.b_raw_nt, q_wxyz=tel.q_wxyz)
     with pytest.raises(ValueError, match="needs housekeeping columns"):
         score(run.document, no_hk, orbit=Orbit.from_tle(hk_world.tle))
+
+
+def test_the_options_object_and_keywords_give_the_same_run(hk_world: OrbitWorld) -> None:
+    from orbitcal.pipeline import CalibrateOptions
+
+    orbit = Orbit.from_tle(hk_world.tle)
+    by_keywords = calibrate(
+        hk_world.telemetry,
+        orbit=orbit,
+        rng=np.random.default_rng(0),
+        method="linear-hk",
+        holdout_fraction=0.3,
+    )
+    options = CalibrateOptions(method="linear-hk", holdout_fraction=0.3)
+    by_options = calibrate(
+        hk_world.telemetry, orbit=orbit, rng=np.random.default_rng(0), options=options
+    )
+    assert by_options.document["linear"] == by_keywords.document["linear"]
+    assert by_options.document["metrics"] == by_keywords.document["metrics"]
+    assert CalibrateOptions.from_keywords(method="lmbp", n_hidden=3) == CalibrateOptions(
+        method="lmbp", method_options={"n_hidden": 3}
+    )
+    with pytest.raises(TypeError, match="options or keywords"):
+        calibrate(
+            hk_world.telemetry,
+            orbit=orbit,
+            rng=np.random.default_rng(0),
+            options=options,
+            method="linear",
+        )

@@ -419,3 +419,31 @@ def test_time_offset_under_tumbling_includes_the_body_rotation(tle_text: str) ->
         db[inner], -0.1 * rate_nt_s[inner], atol=0.03 * np.abs(0.1 * rate_nt_s).max()
     )
     assert norm_rms_nt(db) > 50.0
+
+
+def test_world_options_and_keywords_simulate_the_same_world(tle_text: str) -> None:
+    from orbitcal.simulate import WorldOptions
+
+    options = WorldOptions(
+        start_utc_s=START_UTC_S,
+        duration_s=600.0,
+        cadence_s=10.0,
+        norad_id=SWARM_A,
+        effects=[make_effect("temperature")],
+        seed=4,
+    )
+    a = simulate_world(tle_text, rng=np.random.default_rng(4), options=options)
+    b = simulate_world(
+        tle_text,
+        rng=np.random.default_rng(4),
+        start_utc_s=START_UTC_S,
+        duration_s=600.0,
+        cadence_s=10.0,
+        norad_id=SWARM_A,
+        effects=[make_effect("temperature")],
+        seed=4,
+    )
+    assert np.array_equal(a.telemetry.b_raw_nt, b.telemetry.b_raw_nt)
+    assert a.truth == b.truth
+    with pytest.raises(TypeError, match="options or keywords"):
+        simulate_world(tle_text, rng=np.random.default_rng(4), options=options, seed=4)

@@ -441,7 +441,7 @@ def test_a_reader_failure_nobody_foresaw_is_a_telemetry_error_not_a_crash(
     def broken_reader(data: bytes, limits: object) -> None:
         raise KeyError("a pandas internal")
 
-    monkeypatch.setattr(telemetry_module, "_read_csv_bytes", broken_reader)
+    monkeypatch.setattr(telemetry_module.readers, "_read_csv_bytes", broken_reader)
     with pytest.raises(TelemetryError, match=r"the csv table could not be read \(KeyError") as info:
         parse_telemetry(b"time,b_x,b_y,b_z\n1690000000,1,2,3\n", fmt="csv")
     assert isinstance(info.value, UnreadableInputError) and info.value.http_status == 400

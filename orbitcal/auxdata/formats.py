@@ -213,15 +213,14 @@ def _leap_second_dat(text: str) -> ParsedTable:
         if not line.strip() or line.lstrip().startswith("#"):
             continue
         fields = line.split()
+        expected = f"{what} line {lineno}: expected 'MJD DAY MONTH YEAR TAI-UTC'"
+        if len(fields) != 5:
+            raise TableFormatError(expected)
         try:
             mjd = float(fields[0])
             offset = float(fields[4])
-            if len(fields) != 5:
-                raise ValueError
-        except (ValueError, IndexError):
-            raise TableFormatError(
-                f"{what} line {lineno}: expected 'MJD DAY MONTH YEAR TAI-UTC'"
-            ) from None
+        except ValueError:
+            raise TableFormatError(expected) from None
         times.append((mjd - _MJD_UNIX_EPOCH) * _DAY_S)
         offsets.append(offset)
     t = np.asarray(times)
@@ -415,15 +414,15 @@ def _rc_index_dat(raw: bytes) -> ParsedTable:
         if not body:
             continue
         f = body.split()
+        expected = (
+            f"{what} line {lineno}: expected 'time RC RC_e RC_i flag' (an HDF5 or DTU text file)"
+        )
+        if len(f) < 4:
+            raise TableFormatError(expected)
         try:
-            if len(f) < 4:
-                raise ValueError
             rows.append((float(f[0]), float(f[2]), float(f[3])))
         except ValueError:
-            raise TableFormatError(
-                f"{what} line {lineno}: expected 'time RC RC_e RC_i flag' "
-                "(an HDF5 or DTU text file)"
-            ) from None
+            raise TableFormatError(expected) from None
     arr = np.asarray(rows, dtype=np.float64).reshape(-1, 3)
     ok = np.all(np.isfinite(arr), axis=1)
     arr = arr[ok]
@@ -467,17 +466,16 @@ def parse_kp_gfz(raw: bytes) -> ParsedTable:
         if not line.strip() or line.startswith("#"):
             continue
         f = line.split()
+        expected = f"{what} line {lineno}: expected 'YYYY MM DD hh.h hh._m days days_m Kp ap D'"
+        if len(f) != 10:
+            raise TableFormatError(expected)
         try:
-            if len(f) != 10:
-                raise ValueError
             y, mo, d = int(f[0]), int(f[1]), int(f[2])
             hour = float(f[3])
             kp = float(f[7])
             t0 = datetime(y, mo, d, tzinfo=UTC).timestamp() + hour * 3600.0
         except ValueError:
-            raise TableFormatError(
-                f"{what} line {lineno}: expected 'YYYY MM DD hh.h hh._m days days_m Kp ap D'"
-            ) from None
+            raise TableFormatError(expected) from None
         if kp < 0:
             continue
         if kp > 9.0:

@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from orbitcal.auxdata.formats import PARSERS, ParsedTable, TableFormatError
+from orbitcal.errors import BadInputError
 
 __all__ = [
     "DEFAULT_URLS",
@@ -299,7 +300,7 @@ def shipped_table(kind: str) -> ActiveTable | None:
 
 def _check_kind(kind: str) -> None:
     if kind not in KINDS:
-        raise ValueError(f"unknown table {kind!r}: use one of {', '.join(KINDS)}")
+        raise BadInputError(f"unknown table {kind!r}: use one of {', '.join(KINDS)}")
 
 
 # --- installed copies ---------------------------------------------------------------------------
@@ -451,7 +452,7 @@ def _fetch(url: str, timeout_s: float) -> tuple[bytes, str]:
     """GET ``url`` (http, https or file); returns the body and the final URL."""
     scheme = urllib.parse.urlparse(url).scheme
     if scheme not in ("http", "https", "file"):
-        raise ValueError(f"unsupported URL scheme {scheme!r} in {url}")
+        raise BadInputError(f"unsupported URL scheme {scheme!r} in {url}")
     with urllib.request.urlopen(url, timeout=timeout_s) as resp:
         declared = resp.headers.get("Content-Length") if hasattr(resp, "headers") else None
         raw = resp.read(MAX_BYTES + 1)

@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from orbitcal.arrays import FloatArray
 from orbitcal.calibrate.errors import DocumentError
+from orbitcal.errors import BadInputError
 
 __all__ = [
     "AffineCalibration",
@@ -186,7 +187,7 @@ class AffineCalibration(Calibration):
         if self.K.shape[1]:
             x = as_hk(x_hk, b.shape[0])
             if x.shape[1] != self.K.shape[1]:
-                raise ValueError(
+                raise BadInputError(
                     f"{self.method} needs housekeeping columns {self.hk_names}, "
                     f"got {x.shape[1]} columns"
                 )

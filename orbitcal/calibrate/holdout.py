@@ -9,6 +9,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from orbitcal.errors import BadInputError
+
 __all__ = ["later_block_split", "rms_nt"]
 
 
@@ -30,7 +32,7 @@ def later_block_split(
         If ``holdout_fraction`` is outside ``[0, 1)``.
     """
     if not 0.0 <= holdout_fraction < 1.0:
-        raise ValueError(f"holdout_fraction must be in [0, 1), got {holdout_fraction}")
+        raise BadInputError(f"holdout_fraction must be in [0, 1), got {holdout_fraction}")
     t = np.asarray(t_utc_s, dtype=np.float64)
     n = t.size
     n_hold = round(holdout_fraction * n)

@@ -38,6 +38,7 @@ from orbitcal.calibrate.errors import (
 )
 from orbitcal.calibrate.linear import CONDITION_LIMIT, equilibrated_condition_number
 from orbitcal.calibrate.lm import LMOptions, LMResult, levenberg_marquardt, torch_threads
+from orbitcal.errors import BadInputError
 
 __all__ = [
     "STOPPING",
@@ -341,10 +342,10 @@ class LMBPCalibration(Calibration):
         b = np.asarray(b_raw_nt, dtype=np.float64).reshape(-1, 3)
         if self.hk_names:
             if x_hk is None:
-                raise ValueError(f"{self.method} needs housekeeping columns {self.hk_names}")
+                raise BadInputError(f"{self.method} needs housekeeping columns {self.hk_names}")
             x = np.asarray(x_hk, dtype=np.float64).reshape(b.shape[0], -1)
             if x.shape[1] != len(self.hk_names):
-                raise ValueError(
+                raise BadInputError(
                     f"{self.method} needs housekeeping columns {self.hk_names}, "
                     f"got {x.shape[1]} columns"
                 )
@@ -496,7 +497,7 @@ def _fit_lmbp(
     if use_hk:
         data = data.without_constant_hk()
         if warm_start is not None and warm_start.hk_names != data.hk_names:
-            raise ValueError(
+            raise BadInputError(
                 f"warm start uses housekeeping {warm_start.hk_names}, the data {data.hk_names}"
             )
     hk_names = list(data.hk_names) if use_hk else []
@@ -512,7 +513,7 @@ def _fit_lmbp(
 
     if warm_start is not None:
         if warm_start.net != net:
-            raise ValueError(f"warm start architecture {warm_start.net} differs from {net}")
+            raise BadInputError(f"warm start architecture {warm_start.net} differs from {net}")
         in_scaler, out_scaler = warm_start.in_scaler, warm_start.out_scaler
     else:
         in_scaler, out_scaler = MinMaxScaler.fit(x_in), MinMaxScaler.fit(b_ref)

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from orbitcal.errors import BadInputError
 from orbitcal.field._base import (
     FieldModel,
     FieldRangeError,
@@ -100,7 +101,7 @@ def _single(name: str) -> FieldModel:
     hint = ""
     if name.upper() == "IGRF":
         hint = " (name the generation, e.g. IGRF-14)"
-    raise ValueError(f"unknown field model {name!r}{hint}; available: {', '.join(FIELD_NAMES)}")
+    raise BadInputError(f"unknown field model {name!r}{hint}; available: {', '.join(FIELD_NAMES)}")
 
 
 @lru_cache(maxsize=32)
@@ -124,12 +125,12 @@ def get_field(name: str = DEFAULT_FIELD) -> FieldModel:
     """
     terms = tuple(t.strip() for t in name.split("+"))
     if any(not t for t in terms):
-        raise ValueError(f"empty term in field name {name!r}")
+        raise BadInputError(f"empty term in field name {name!r}")
     if len(set(terms)) != len(terms):
-        raise ValueError(f"field name {name!r} repeats a term")
+        raise BadInputError(f"field name {name!r} repeats a term")
     main = [t for t in terms if t in MAIN_FIELD_NAMES]
     if len(main) > 1:
-        raise ValueError(
+        raise BadInputError(
             f"field name {name!r} adds {' and '.join(main)}: both are main-field models; use one"
         )
     if len(terms) == 1:

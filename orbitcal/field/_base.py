@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from orbitcal.arrays import FloatArray
-from orbitcal.errors import OutOfRangeError
+from orbitcal.errors import BadInputError, OutOfRangeError
 from orbitcal.field._kernel import HAVE_NUMBA, synth_pp_nec_nt
 from orbitcal.field.synthesis import n_block_coeffs, synth_internal_nec_nt, to_degree_blocks
 
@@ -79,10 +79,10 @@ def _use_numba(backend: str) -> bool:
         return False
     if backend == "numba":
         if not HAVE_NUMBA:
-            raise ValueError("backend 'numba' requested but numba is not installed")
+            raise BadInputError("backend 'numba' requested but numba is not installed")
         return True
     if backend != "auto":
-        raise ValueError(f"unknown backend {backend!r}; use 'auto', 'numba' or 'numpy'")
+        raise BadInputError(f"unknown backend {backend!r}; use 'auto', 'numba' or 'numpy'")
     return HAVE_NUMBA and os.environ.get("ORBITCAL_FIELD_BACKEND", "").lower() != "numpy"
 
 

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from orbitcal.errors import BadInputError
 from orbitcal.field._base import SphericalHarmonicModel
 from orbitcal.field.shc import read_shc
 
@@ -37,7 +38,7 @@ def field_data_path(filename: str) -> Path:
 def chaos_core(name: str = "CHAOS-8.1") -> SphericalHarmonicModel:
     """The CHAOS-8.1 core field (n ≤ 20), valid 1997-02-07 .. 2025-02-07 (its spline knots)."""
     if name != "CHAOS-8.1":
-        raise ValueError(f"unknown CHAOS core model {name!r}; available: CHAOS-8.1")
+        raise BadInputError(f"unknown CHAOS core model {name!r}; available: CHAOS-8.1")
     shc = read_shc(field_data_path("CHAOS-8.1_core.shc"))
     order = shc.order
     step = max(shc.step, 1)

@@ -15,6 +15,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from orbitcal.errors import BadInputError
 from orbitcal.field._base import SphericalHarmonicModel
 from orbitcal.field.chaos import field_data_path
 from orbitcal.field.shc import read_shc
@@ -35,7 +36,7 @@ def crustal_field(name: str) -> SphericalHarmonicModel:
     try:
         filename = CRUSTAL_MODELS[name]
     except KeyError:
-        raise ValueError(
+        raise BadInputError(
             f"unknown crustal model {name!r}; available: {', '.join(CRUSTAL_MODELS)}"
         ) from None
     shc = read_shc(field_data_path(filename))

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from orbitcal.errors import BadInputError
 from orbitcal.field._base import SphericalHarmonicModel
 from orbitcal.field.shc import read_shc
 
@@ -32,7 +33,7 @@ def igrf_shc_path(name: str) -> Path:
     try:
         filename = IGRF_GENERATIONS[name]
     except KeyError:
-        raise ValueError(
+        raise BadInputError(
             f"unknown IGRF generation {name!r}; available: {', '.join(IGRF_GENERATIONS)}"
         ) from None
     return Path(str(resources.files("ppigrf").joinpath(filename)))

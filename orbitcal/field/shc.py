@@ -16,6 +16,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from orbitcal.errors import UnreadableInputError
+
 __all__ = ["ShcFile", "read_shc"]
 
 
@@ -79,18 +81,20 @@ def read_shc(path: str | Path) -> ShcFile:
                 continue
             rows.append(values)
     if params is None or times is None:
-        raise ValueError(f"{path}: not an SHC file (no parameter or time line)")
+        raise UnreadableInputError(f"{path}: not an SHC file (no parameter or time line)")
     nmin, nmax, n_times, order, step = params
     if times.shape[0] != n_times:
-        raise ValueError(f"{path}: expected {n_times} snapshot times, found {times.shape[0]}")
+        raise UnreadableInputError(
+            f"{path}: expected {n_times} snapshot times, found {times.shape[0]}"
+        )
     table = np.vstack(rows)
     if table.shape[1] != n_times + 2:
-        raise ValueError(f"{path}: coefficient rows must hold n, m and {n_times} values")
+        raise UnreadableInputError(f"{path}: coefficient rows must hold n, m and {n_times} values")
     coeffs = np.zeros((n_times, nmax * (nmax + 2)))
     n = table[:, 0].astype(int)
     m = table[:, 1].astype(int)
     if n.min() < nmin or n.max() > nmax:
-        raise ValueError(f"{path}: degrees outside {nmin}..{nmax}")
+        raise UnreadableInputError(f"{path}: degrees outside {nmin}..{nmax}")
     # flat index: g_n0 -> n^2-1, g_nm -> n^2-1+2m-1, h_nm -> n^2-1+2m
     index = n * n - 1 + np.where(m > 0, 2 * m - 1, np.where(m < 0, -2 * m, 0))
     coeffs[:, index] = table[:, 2:].T

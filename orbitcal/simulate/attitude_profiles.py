@@ -21,6 +21,7 @@ from scipy.spatial.transform import Rotation
 
 from orbitcal.arrays import FloatArray
 from orbitcal.attitude import matrix_to_quat_wxyz, quat_normalize, wxyz_to_xyzw, xyzw_to_wxyz
+from orbitcal.errors import BadInputError
 
 __all__ = [
     "ATTITUDE_PROFILES",
@@ -147,7 +148,7 @@ def attitude_profile(name: str, **params: Any) -> AttitudeProfile:
     try:
         cls = ATTITUDE_PROFILES[name]
     except KeyError:
-        raise ValueError(
+        raise BadInputError(
             f"unknown attitude profile {name!r}: use one of {', '.join(ATTITUDE_PROFILES)}"
         ) from None
     return cls(**params)  # type: ignore[no-any-return]

@@ -37,6 +37,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 import numpy as np
 
 from orbitcal.arrays import FloatArray
+from orbitcal.errors import BadInputError
 from orbitcal.geomag import dipole_axis_itrs, magnetic_latitude_deg
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -74,7 +75,7 @@ class Injection(NamedTuple):
 def _vec3(x: Any, name: str) -> FloatArray:
     v = np.broadcast_to(np.asarray(x, dtype=np.float64), (3,))
     if not np.all(np.isfinite(v)):
-        raise ValueError(f"{name} must be finite")
+        raise BadInputError(f"{name} must be finite")
     return np.array(v)
 
 
@@ -85,7 +86,7 @@ def _mat3(x: Any, name: str) -> FloatArray:
     elif m.ndim == 0 or m.shape == (3,):
         m = np.diag(np.broadcast_to(m, (3,)))
     if m.shape != (3, 3) or not np.all(np.isfinite(m)):
-        raise ValueError(f"{name} must be a finite 3×3 matrix (9 numbers, 3 diagonal or 1)")
+        raise BadInputError(f"{name} must be a finite 3×3 matrix (9 numbers, 3 diagonal or 1)")
     return m
 
 
@@ -212,7 +213,9 @@ class ExternalFieldEffect(Effect):
                 amp = amp * np.exp(-(t - t[0]) / float(self.recovery_time_s))
             b_itrs = amp[:, None] * dipole_axis_itrs()
         else:
-            raise ValueError(f"external_field model must be 'dipole' or 'RC', not {self.model!r}")
+            raise BadInputError(
+                f"external_field model must be 'dipole' or 'RC', not {self.model!r}"
+            )
         return Injection(state.itrs_to_body(b_itrs))
 
 
@@ -459,11 +462,13 @@ def make_effect(name: str, **params: Any) -> Effect:
     try:
         cls = EFFECTS[name]
     except KeyError:
-        raise ValueError(f"unknown effect {name!r}: use one of {', '.join(EFFECT_NAMES)}") from None
+        raise BadInputError(
+            f"unknown effect {name!r}: use one of {', '.join(EFFECT_NAMES)}"
+        ) from None
     known = {f.name: f for f in dataclasses.fields(cls)}
     unknown = sorted(set(params) - set(known))
     if unknown:
-        raise ValueError(
+        raise BadInputError(
             f"effect {name!r} has no parameter {unknown[0]!r}; its parameters: {', '.join(known)}"
         )
     coerced: dict[str, Any] = {}
@@ -505,7 +510,7 @@ def parse_effect_spec(spec: str, *, read_file: Callable[[str], str] | None = Non
     for item in filter(None, (p.strip() for p in rest.split(","))):
         key, eq, value = item.partition("=")
         if not eq:
-            raise ValueError(f"effect parameter {item!r} must be written key=value")
+            raise BadInputError(f"effect parameter {item!r} must be written key=value")
         if key.strip() == "magnitude":
             magnitude = float(value)
         elif value.startswith("@") and read_file is not None:

@@ -16,6 +16,7 @@ import numpy.typing as npt
 from orbitcal import frames
 from orbitcal.arrays import FloatArray
 from orbitcal.attitude import frame_to_body
+from orbitcal.errors import BadInputError, OrbitProblemError
 from orbitcal.orbit import Orbit
 from orbitcal.simulate.attitude_profiles import AttitudeProfile
 from orbitcal.sun import illumination_conical, sun_position_gcrs_km
@@ -60,7 +61,7 @@ def kinematics(tle: Orbit, attitude: AttitudeProfile, t_utc_s: npt.ArrayLike) ->
     code = np.asarray(eph.error_code)
     bad = np.flatnonzero(code != 0)
     if bad.size:
-        raise ValueError(
+        raise OrbitProblemError(
             f"SGP4 failed for NORAD {tle.norad_id} at {bad.size} samples (first: sample "
             f"{int(bad[0])}, error code {int(code[bad[0]])}): the TLE is stale or decayed for "
             "these dates"
@@ -257,7 +258,7 @@ class WorldState:
     def kinematics_at(self, t_utc_s: FloatArray) -> Kinematics:
         """Orbit and attitude of this world's spacecraft at other times."""
         if self.tle is None:
-            raise ValueError(
+            raise BadInputError(
                 "this world has positions but no orbit (measured-field world): effects that "
                 "re-evaluate the orbit (time_offset, orbit_error) need a TLE"
             )

@@ -36,6 +36,7 @@ import pandas as pd
 
 from orbitcal import frames
 from orbitcal.arrays import FloatArray
+from orbitcal.errors import BadInputError
 from orbitcal.metrics import norm_rms_nt
 from orbitcal.orbit import Orbit, read_tle_sets, select_orbit
 from orbitcal.sensor import SensorModel
@@ -59,6 +60,7 @@ __all__ = [
     "TleSet",
     "World",
     "WorldFiles",
+    "WorldOptions",
     "WorldState",
     "kinematics",
     "orbital_thermal_cycle_c",
@@ -216,12 +218,14 @@ def read_world(directory: str | Path) -> WorldFiles:
     root = Path(directory)
     truth_path = root / "truth.json"
     if not truth_path.is_file():
-        raise ValueError(f"{root} is not a world directory (no truth.json)")
+        raise BadInputError(f"{root} is not a world directory (no truth.json)")
     truth = json.loads(truth_path.read_text())
     files = truth.get("files", {})
     res = read_telemetry(root / files.get("telemetry", "telemetry.csv"))
     if res.rejected:
-        raise ValueError(f"{root}: {len(res.rejected)} telemetry rows rejected: {res.rejected[0]}")
+        raise BadInputError(
+            f"{root}: {len(res.rejected)} telemetry rows rejected: {res.rejected[0]}"
+        )
     samples = pd.read_parquet(root / files.get("truth_samples", "truth_samples.parquet"))
     tle_path = root / files.get("tle", "spacecraft.tle")
     tle_text = tle_path.read_text() if tle_path.is_file() else ""
@@ -236,37 +240,73 @@ def _anchor(profile: AttitudeProfile, t0_utc_s: float) -> AttitudeProfile:
     return profile
 
 
-def simulate_world(
-    tle: TleSet | str,
-    *,
-    start_utc_s: float,
-    duration_s: float,
-    cadence_s: float,
-    rng: np.random.Generator,
-    attitude: AttitudeProfile | None = None,
-    sensor: SensorModel | None = None,
-    sensor_after: SensorModel | None = None,
-    sensor_change_utc_s: float | None = None,
-    effects: Sequence[Effect] = (),
-    field: str = "IGRF-14",
-    housekeeping: Housekeeping | None = None,
-    include_position: bool = False,
-    norad_id: int | None = None,
-    seed: int | None = None,
-) -> World:
-    """Simulate a spacecraft's magnetometer telemetry with known ground truth.
+def _inject(
+    state: WorldState, effects: Sequence[Effect], rngs: Sequence[np.random.Generator], n: int
+) -> tuple[dict[str, FloatArray], list[dict[str, Any]], dict[str, FloatArray]]:
+    """Each effect's field ``(N, 3)`` [nT, body] by name, its truth record, and the housekeeping
+    channels the effects add (in the effects' order, one child generator each)."""
+    injected: dict[str, FloatArray] = {}
+    effect_truth: list[dict[str, Any]] = []
+    extra_hk: dict[str, FloatArray] = {}
+    for effect, erng in zip(effects, rngs, strict=True):
+        inj = effect.inject(state, erng)
+        key = effect.name if effect.name not in injected else f"{effect.name}_{len(injected)}"
+        injected[key] = np.asarray(inj.db_body_nt, dtype=np.float64)
+        extra_hk.update(inj.hk)
+        effect_truth.append(
+            {
+                "name": effect.name,
+                "params": _jsonable(effect.params),
+                "rms_nt": norm_rms_nt(injected[key]),
+                "axis_rms_nt": np.sqrt(np.mean(injected[key] ** 2, axis=0)).tolist(),
+                "max_nt": float(np.max(np.linalg.norm(injected[key], axis=1))) if n else 0.0,
+                **({"info": _jsonable(inj.info)} if inj.info else {}),
+            }
+        )
+    return injected, effect_truth, extra_hk
 
-    Parameters
+
+def _measure(
+    b_true_nt: FloatArray,
+    t_utc_s: FloatArray,
+    sensor: SensorModel,
+    sensor_after: SensorModel | None,
+    change_utc_s: float | None,
+    noise_rng: np.random.Generator,
+) -> FloatArray:
+    """Raw readings ``(N, 3)`` [nT, sensor axes] of the true field, through ``sensor`` (and
+    ``sensor_after`` from ``change_utc_s`` on) with one draw of white noise."""
+    # Wang 2020 eq. 1 (the same draws as SensorModel.measure: normal = σ · standard normal).
+    z = noise_rng.standard_normal(b_true_nt.shape)
+    b_raw: FloatArray = sensor.measure_noiseless(b_true_nt) + sensor.noise_std_nt * z
+    if sensor_after is not None and change_utc_s is not None:
+        after = t_utc_s >= change_utc_s
+        b_raw[after] = (
+            sensor_after.measure_noiseless(b_true_nt[after]) + sensor_after.noise_std_nt * z[after]
+        )
+    return b_raw
+
+
+def _sensor_change_truth(after: SensorModel | None, change_utc_s: float | None) -> dict[str, Any]:
+    if after is None or change_utc_s is None:
+        return {}
+    return {
+        "sensor_after": after.to_dict(),
+        "linear_after": after.linear,
+        "sensor_change": utc_s_to_iso([change_utc_s])[0],
+    }
+
+
+@dataclass(frozen=True)
+class WorldOptions:
+    """What :func:`simulate_world` simulates (one typed object instead of a keyword list).
+
+    Attributes
     ----------
-    tle : TleSet or str
-        The element set (or a TLE file's text: the set nearest ``start_utc_s`` is chosen).
     start_utc_s : float
         First sample, POSIX seconds of UTC [s].
     duration_s, cadence_s : float
         Span and sampling interval [s].
-    rng : numpy.random.Generator
-        The one source of randomness (child generators are spawned for the sensor, the
-        housekeeping and each effect in order, so results are reproducible).
     attitude : AttitudeProfile or None
         Default nadir pointing (LVLH).
     sensor : SensorModel or None
@@ -286,18 +326,62 @@ def simulate_world(
         Spacecraft to pick when ``tle`` is a file's text.
     seed : int or None
         Recorded in the truth (the caller made ``rng`` from it).
+    """
+
+    start_utc_s: float
+    duration_s: float
+    cadence_s: float
+    attitude: AttitudeProfile | None = None
+    sensor: SensorModel | None = None
+    sensor_after: SensorModel | None = None
+    sensor_change_utc_s: float | None = None
+    effects: Sequence[Effect] = ()
+    field: str = "IGRF-14"
+    housekeeping: Housekeeping | None = None
+    include_position: bool = False
+    norad_id: int | None = None
+    seed: int | None = None
+
+
+def simulate_world(
+    tle: TleSet | str,
+    *,
+    rng: np.random.Generator,
+    options: WorldOptions | None = None,
+    **keywords: Any,
+) -> World:
+    """Simulate a spacecraft's magnetometer telemetry with known ground truth.
+
+    Parameters
+    ----------
+    tle : TleSet or str
+        The element set (or a TLE file's text: the set nearest ``start_utc_s`` is chosen).
+    rng : numpy.random.Generator
+        The one source of randomness (child generators are spawned for the sensor, the
+        housekeeping and each effect in order, so results are reproducible).
+    options : WorldOptions
+        What to simulate.
+    **keywords
+        Instead of ``options``: its fields as keywords (``start_utc_s=..., duration_s=...``).
 
     Returns
     -------
     World
     """
+    if options is not None and keywords:
+        raise TypeError("simulate_world() takes options or keywords, not both")
+    o = options if options is not None else WorldOptions(**keywords)
+    start_utc_s, duration_s, cadence_s = o.start_utc_s, o.duration_s, o.cadence_s
+    attitude, sensor, housekeeping, effects = o.attitude, o.sensor, o.housekeeping, o.effects
+    sensor_after, sensor_change_utc_s = o.sensor_after, o.sensor_change_utc_s
+    field, include_position, norad_id, seed = o.field, o.include_position, o.norad_id, o.seed
     if duration_s <= 0 or cadence_s <= 0:
-        raise ValueError("duration_s and cadence_s must be positive")
+        raise BadInputError("duration_s and cadence_s must be positive")
     n = int(np.floor(duration_s / cadence_s + 1e-9))
     if n < 2:
-        raise ValueError(f"{n} sample(s): make duration_s at least twice cadence_s")
+        raise BadInputError(f"{n} sample(s): make duration_s at least twice cadence_s")
     if (sensor_after is None) != (sensor_change_utc_s is None):
-        raise ValueError("give both sensor_after and sensor_change_utc_s, or neither")
+        raise BadInputError("give both sensor_after and sensor_change_utc_s, or neither")
     tle_set = (
         tle if isinstance(tle, TleSet) else select_tle(tle, norad_id=norad_id, at_utc_s=start_utc_s)
     )
@@ -319,36 +403,12 @@ def simulate_world(
         hk_rng=hk_rng,
     )
 
-    injected: dict[str, FloatArray] = {}
-    effect_truth: list[dict[str, Any]] = []
-    extra_hk: dict[str, FloatArray] = {}
-    for effect, erng in zip(effects, effect_rngs, strict=True):
-        inj = effect.inject(state, erng)
-        key = effect.name if effect.name not in injected else f"{effect.name}_{len(injected)}"
-        injected[key] = np.asarray(inj.db_body_nt, dtype=np.float64)
-        extra_hk.update(inj.hk)
-        effect_truth.append(
-            {
-                "name": effect.name,
-                "params": _jsonable(effect.params),
-                "rms_nt": norm_rms_nt(injected[key]),
-                "axis_rms_nt": np.sqrt(np.mean(injected[key] ** 2, axis=0)).tolist(),
-                "max_nt": float(np.max(np.linalg.norm(injected[key], axis=1))) if n else 0.0,
-                **({"info": _jsonable(inj.info)} if inj.info else {}),
-            }
-        )
+    injected, effect_truth, extra_hk = _inject(state, effects, effect_rngs, n)
 
     b_true = state.b_ref_body_nt.copy()
     for db in injected.values():
         b_true += db
-    # Wang 2020 eq. 1 (the same draws as SensorModel.measure: normal = σ · standard normal).
-    z = noise_rng.standard_normal(b_true.shape)
-    b_raw = sensor.measure_noiseless(b_true) + sensor.noise_std_nt * z
-    if sensor_after is not None and sensor_change_utc_s is not None:
-        after = t >= sensor_change_utc_s
-        b_raw[after] = (
-            sensor_after.measure_noiseless(b_true[after]) + sensor_after.noise_std_nt * z[after]
-        )
+    b_raw = _measure(b_true, t, sensor, sensor_after, sensor_change_utc_s, noise_rng)
 
     temperature = extra_hk.pop("temperature", state.temperature_c)
     mtq = state.mtq_am2
@@ -375,15 +435,7 @@ def simulate_world(
         "reference_field": field,
         "sensor": sensor.to_dict(),
         "linear": sensor.linear,
-        **(
-            {
-                "sensor_after": sensor_after.to_dict(),
-                "linear_after": sensor_after.linear,
-                "sensor_change": utc_s_to_iso([sensor_change_utc_s])[0],
-            }
-            if sensor_after is not None and sensor_change_utc_s is not None
-            else {}
-        ),
+        **_sensor_change_truth(sensor_after, sensor_change_utc_s),
         "effects": effect_truth,
         "verdict": effect_truth[0]["name"]
         if len(effect_truth) == 1
@@ -452,9 +504,9 @@ def simulate_measured_field(
     r_itrs = np.asarray(r_itrs_km, dtype=np.float64)
     b_nec = np.asarray(b_nec_nt, dtype=np.float64)
     if t.ndim != 1 or t.size < 2 or r_itrs.shape != (t.size, 3) or b_nec.shape != (t.size, 3):
-        raise ValueError("need t (N,), r_itrs_km (N, 3) and b_nec_nt (N, 3) with N ≥ 2")
+        raise BadInputError("need t (N,), r_itrs_km (N, 3) and b_nec_nt (N, 3) with N ≥ 2")
     if np.any(np.diff(t) <= 0):
-        raise ValueError("times must be strictly ascending")
+        raise BadInputError("times must be strictly ascending")
     profile: AttitudeProfile = attitude if attitude is not None else NadirLVLH()
     housekeeping = housekeeping or Housekeeping()
     sensor_rng, hk_rng, noise_rng = rng.spawn(3)

@@ -327,7 +327,7 @@ def _scan_reference(data: bytes, per_line: bool) -> tuple[int, int, int]:
 def test_json_scan_matches_a_byte_by_byte_model(data: bytes) -> None:
     """The vectorised depth scanner (what guards orjson) against a plain loop, with chunks of a
     few bytes so every carry between chunks (string, backslash run, depth) is exercised."""
-    from orbitcal import telemetry
+    from orbitcal.telemetry import limits as telemetry  # the scanner and its chunk size
 
     old = telemetry._SCAN_CHUNK
     telemetry._SCAN_CHUNK = 5
