@@ -85,6 +85,7 @@ def run(args: argparse.Namespace) -> int:
     from orbitcal.cli import CliError
     from service.app import create_app
     from service.auth import is_loopback
+    from service.http import uvicorn_options
     from service.logs import redact_url
 
     settings = settings_from_args(args)
@@ -131,7 +132,15 @@ def run(args: argparse.Namespace) -> int:
             # uvicorn kills a worker that does not answer its health ping within this time; a
             # retraining or diagnosis holding the GIL on a busy machine must not cost the worker
             timeout_worker_healthcheck=120,
+            **uvicorn_options(settings),
         )
         return 0
-    uvicorn.run(app, host=args.host, port=args.port, log_level="warning", access_log=False)
+    uvicorn.run(
+        app,
+        host=args.host,
+        port=args.port,
+        log_level="warning",
+        access_log=False,
+        **uvicorn_options(settings),
+    )
     return 0
