@@ -28,6 +28,7 @@ import asyncio
 import json
 import logging
 import math
+import re
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -40,6 +41,11 @@ from service.settings import Settings
 __all__ = ["HeaderCount", "HttpLimits", "LimitedH11Protocol", "uvicorn_options"]
 
 log = logging.getLogger("orbitcal.service.http")
+
+#: The end of a header block (h11 accepts bare LF line ends too).
+_BLANK_LINE = re.compile(rb"\n\r?\n")
+#: After answering a cut request, how long its remainder is read and dropped before closing [s].
+LINGER_S = 2.0
 
 
 @dataclass(frozen=True)
@@ -100,6 +106,8 @@ class LimitedH11Protocol(H11Protocol):
         self._body_idle_timer: asyncio.TimerHandle | None = None
         self._body_deadline: asyncio.TimerHandle | None = None
         self._shutdown_timer: asyncio.TimerHandle | None = None
+        self._discarding = False
+        self._tail = b""  # the last bytes of the header block so far (a blank line may straddle)
         self._arm_header_timer()
 
     # --- timers ------------------------------------------------------------------------------
@@ -179,35 +187,53 @@ class LimitedH11Protocol(H11Protocol):
             "request cut",
             extra={"status": status, "reason": detail, "client": self._who()},
         )
-        if not started and not self.transport.is_closing():
-            self.transport.write(_raw_response(status, reason, detail))
         if cycle is not None and not cycle.response_complete:
             cycle.disconnected = True
             cycle.message_event.set()
         self._cancel("_header_timer", "_body_idle_timer", "_body_deadline", "_shutdown_timer")
-        self.transport.close()
+        if started or self.transport.is_closing():
+            self.transport.close()
+            return
+        # Answer, half-close, and discard what still arrives for a moment before closing: a
+        # close with unread data makes the kernel send RST, and the client would lose the
+        # answer (the "lingering close" of nginx and Apache).
+        self.transport.write(_raw_response(status, reason, detail))
+        self._discarding = True
+        if self.transport.can_write_eof():
+            self.transport.write_eof()
+        self.loop.call_later(LINGER_S, self.transport.close)
 
     # --- uvicorn's protocol interface --------------------------------------------------------
 
     def data_received(self, data: bytes) -> None:
+        if self._discarding:  # a cut request's remainder: read and dropped until the close
+            return
         awaiting_headers = self.conn.their_state is h11.IDLE
         if awaiting_headers:
+            # Measured before h11 sees the bytes, so that an oversized header block is refused
+            # even when it arrives whole in one read (the search is linear in what arrives).
             self._arm_header_timer()
-            self._header_bytes += len(data)
-        super().data_received(data)
-        if self.transport.is_closing():
-            return
-        state = self.conn.their_state
-        if state is h11.IDLE:
-            if self._header_bytes > self._lim.max_header_bytes:
+            window = self._tail + data
+            end = _BLANK_LINE.search(window)
+            head = len(data) if end is None else end.end() - len(self._tail)
+            if self._header_bytes + head > self._lim.max_header_bytes:
                 self._cut(
                     431,
                     "Request Header Fields Too Large",
                     f"request line and headers exceed {self._lim.max_header_bytes} bytes",
                 )
+                return
+            self._header_bytes += head
+            self._tail = window[-2:]
+        super().data_received(data)
+        if self.transport.is_closing():
+            return
+        state = self.conn.their_state
+        if state is h11.IDLE:
             return
         if awaiting_headers:  # the headers are complete
             self._header_bytes = 0
+            self._tail = b""
             self._cancel("_header_timer")
         if state is h11.SEND_BODY:
             self._cancel("_body_idle_timer")

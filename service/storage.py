@@ -49,6 +49,7 @@ __all__ = [
     "bump_data_revision",
     "count_samples",
     "delete_samples",
+    "find_window",
     "hash_key",
     "insert_samples",
     "log_upload",
@@ -587,6 +588,30 @@ def _dense_latest_window(
     return Window(end - window_s, end, n, {"future": int(n_future)} if n_future else {})
 
 
+def find_window(
+    conn: Connection,
+    spacecraft_pk: int,
+    *,
+    window_s: float,
+    min_samples: int,
+    now_utc_s: float,
+) -> Any:
+    """The window of samples a retraining would read now (times only, no sample read)."""
+    from orbitcal.pipeline import FUTURE_TOLERANCE_S, training_window
+
+    window = _dense_latest_window(
+        conn, spacecraft_pk, window_s, min_samples, now_utc_s + FUTURE_TOLERANCE_S
+    )
+    if window is None:  # the latest stretch is sparse: scan every sample time
+        window = training_window(
+            sample_times(conn, spacecraft_pk),
+            window_s=window_s,
+            min_samples=min_samples,
+            now_utc_s=now_utc_s,
+        )
+    return window
+
+
 def read_window(
     conn: Connection,
     spacecraft_pk: int,
@@ -600,18 +625,11 @@ def read_window(
 
     ``window.excluded`` also counts the quarantined samples inside the window.
     """
-    from orbitcal.pipeline import FUTURE_TOLERANCE_S, Window, training_window
+    from orbitcal.pipeline import Window
 
-    window = _dense_latest_window(
-        conn, spacecraft_pk, window_s, min_samples, now_utc_s + FUTURE_TOLERANCE_S
+    window = find_window(
+        conn, spacecraft_pk, window_s=window_s, min_samples=min_samples, now_utc_s=now_utc_s
     )
-    if window is None:  # the latest stretch is sparse: scan every sample time
-        window = training_window(
-            sample_times(conn, spacecraft_pk),
-            window_s=window_s,
-            min_samples=min_samples,
-            now_utc_s=now_utc_s,
-        )
     if window.end_utc_s is None:
         return window, SampleArrays(np.zeros(0), {c: np.zeros(0) for c in SAMPLE_COLUMNS}, {})
     samples = read_samples(
