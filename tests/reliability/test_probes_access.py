@@ -541,10 +541,10 @@ def test_failure_bucket_refills_at_its_rate() -> None:
     wait = take(0.0)
     assert wait == pytest.approx(2.0)  # one token at 0.5/s
     now[0] += 1.9
-    assert take(0.0) == pytest.approx(0.2)
+    assert take(0.0) == pytest.approx(0.1)  # 0.95 token refilled
     now[0] += 0.2
-    assert take(1.0) == 0.0  # refilled: one more failure allowed
-    assert take(0.0) == pytest.approx(2.0)
+    assert take(1.0) == 0.0  # 1.05 tokens: one more failure allowed
+    assert take(0.0) == pytest.approx(1.9)  # 0.05 left
 
 
 def test_valid_keys_do_not_spend_the_failure_budget(tmp_path: Path) -> None:
