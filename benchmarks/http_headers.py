@@ -2,7 +2,7 @@
 
 Serves a trivial ASGI app with uvicorn's ``httptools`` and ``h11`` implementations (the h11 buffer
 limit raised so that it parses the whole header, as httptools does) and sends one request whose
-``X-Pad`` header is 1, 2, 4 and 8 MiB, written in 64 KiB pieces as a client on a socket does.
+``X-Pad`` header is 1, 2, 4, 8 and 16 MiB, written in 64 KiB pieces as a client on a socket does.
 Prints the seconds until the answer and the ratio of each size's time to the previous size's:
 ~2 means linear cost, ~4 quadratic.
 
@@ -47,7 +47,7 @@ def _one(port: int, header_bytes: int) -> float:
 
 
 def main() -> None:
-    sizes_mib = (1, 2, 4, 8)
+    sizes_mib = (1, 2, 4, 8, 16)
     for impl in ("httptools", "h11"):
         port = _free_port()
         proc = subprocess.Popen([sys.executable, "-c", APP, str(port), impl])

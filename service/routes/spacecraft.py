@@ -73,10 +73,8 @@ def _check_epoch_near_data(conn: Any, sc: Any, orbit: Orbit, part: str, settings
     try:
         check_epoch_near(orbit, [window.start_utc_s, window.end_utc_s])
     except OrbitcalError as exc:
-        exc.args = (
-            f"{exc} (the data of the next retraining; ?allow_stale_elements=true accepts them "
-            "as the CLI's --allow-stale-elements does)",
-        )
+        message = str(exc).replace("--allow-stale-elements", "?allow_stale_elements=true")
+        exc.args = (f"{message} (compared with the data the next retraining would read)",)
         _name_body_field(exc, part)
         raise
 
