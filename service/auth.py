@@ -20,6 +20,8 @@ from fastapi import Depends, HTTPException, Request, Security
 from fastapi.concurrency import run_in_threadpool
 from fastapi.security import APIKeyHeader
 
+from service.ratelimit import AUTH_THROTTLE, retry_after_s
+from service.state import service_state
 from service.storage import ApiKey, hash_key, read_tx, write_tx
 
 __all__ = [
@@ -72,6 +74,11 @@ class Principal:
             return True
         return spacecraft is not None and f"{action}:{spacecraft}" in self.scopes
 
+    def reads_everything(self) -> bool:
+        """Whether the key may read every spacecraft (``admin`` or ``read:*``): the scope of
+        answers that aggregate over the fleet (``/metrics`` totals)."""
+        return "admin" in self.scopes or "read:*" in self.scopes
+
 
 def is_loopback(host: str) -> bool:
     """Whether the configured bind host (``serve --host``, ``ORBITCAL_BIND_HOST``) is loopback.
@@ -91,7 +98,7 @@ def create_key(request: Request, name: str, scopes: list[str]) -> tuple[str, str
     """Create a key; return ``(key, prefix)``. The key is shown once and never stored."""
     key = KEY_PREFIX + secrets.token_urlsafe(32)
     prefix = key[:12]
-    with write_tx(request.app.state.engine) as conn:
+    with write_tx(service_state(request).engine) as conn:
         conn.execute(
             sa.insert(ApiKey).values(
                 key_hash=hash_key(key),
@@ -105,7 +112,17 @@ def create_key(request: Request, name: str, scopes: list[str]) -> tuple[str, str
     return key, prefix
 
 
-def _unauthorised(reason: str) -> HTTPException:
+def _unauthorised(request: Request, reason: str) -> HTTPException:
+    """401, or 429 while the client's address has spent its failed-authentication budget."""
+    throttled = (request.scope.get("state") or {}).get(AUTH_THROTTLE)
+    if throttled is not None:
+        detail, wait_s = throttled
+        seconds = retry_after_s(wait_s)
+        return HTTPException(
+            status_code=429,
+            detail=f"{detail}; retry after {seconds} s ({reason})",
+            headers={"Retry-After": str(seconds)},
+        )
     return HTTPException(status_code=401, detail=reason, headers={"WWW-Authenticate": "X-API-Key"})
 
 
@@ -130,31 +147,30 @@ async def principal(
     Lookups are cached for ``key_cache_s`` seconds per key hash (so a revocation takes effect
     within that time); the bootstrap admin key never touches the database.
     """
-    settings = request.app.state.settings
-    if not settings.auth:
+    state = service_state(request)
+    if not state.settings.auth:
         return Principal("anonymous (authentication off)", frozenset({"admin"}))
     if not x_api_key:
-        raise _unauthorised("missing X-API-Key header")
+        raise _unauthorised(request, "missing X-API-Key header")
     presented = hash_key(x_api_key)
-    admin_hash: str | None = request.app.state.admin_key_hash
-    if admin_hash is not None and hmac.compare_digest(presented, admin_hash):
+    if state.admin_key_hash is not None and hmac.compare_digest(presented, state.admin_key_hash):
         return Principal("bootstrap admin", frozenset({"admin"}))
-    cache: dict[str, tuple[Principal | None, float]] = request.app.state.key_cache
+    cache = state.key_cache
     hit = cache.get(presented)
     if hit is not None and hit[1] > time.monotonic():
         who = hit[0]
     else:
-        async with request.app.state.key_lock:  # single flight for concurrent misses
+        async with state.key_lock:  # single flight for concurrent misses
             hit = cache.get(presented)
             if hit is not None and hit[1] > time.monotonic():
                 who = hit[0]
             else:
-                who = await run_in_threadpool(_lookup, request.app.state.engine, presented)
+                who = await run_in_threadpool(_lookup, state.engine, presented)
                 if len(cache) > 10_000:
                     cache.clear()
-                cache[presented] = (who, time.monotonic() + settings.key_cache_s)
+                cache[presented] = (who, time.monotonic() + state.settings.key_cache_s)
     if who is None:
-        raise _unauthorised("unknown or revoked API key")
+        raise _unauthorised(request, "unknown or revoked API key")
     return who
 
 

@@ -14,9 +14,18 @@ from fastapi import Depends, HTTPException, Request
 from sqlalchemy.engine import Connection, Engine
 
 from service.settings import Settings
+from service.state import ServiceState, service_state
 from service.storage import Spacecraft
 
-__all__ = ["MAX_ROW_ID", "EngineDep", "SettingsDep", "get_spacecraft", "iso", "iso_or_none"]
+__all__ = [
+    "MAX_ROW_ID",
+    "EngineDep",
+    "SettingsDep",
+    "StateDep",
+    "get_spacecraft",
+    "iso",
+    "iso_or_none",
+]
 
 #: The largest id a table's ``sa.Integer`` primary key holds (PostgreSQL ``integer``, 32 bits):
 #: integer ids in paths and bodies are validated against it (422), so a huge id is never sent to
@@ -25,15 +34,20 @@ MAX_ROW_ID = 2**31 - 1
 
 
 async def _engine(request: Request) -> Engine:
-    return request.app.state.engine  # type: ignore[no-any-return]
+    return service_state(request).engine
 
 
 async def _settings(request: Request) -> Settings:
-    return request.app.state.settings  # type: ignore[no-any-return]
+    return service_state(request).settings
+
+
+async def _state(request: Request) -> ServiceState:
+    return service_state(request)
 
 
 EngineDep = Annotated[Engine, Depends(_engine)]
 SettingsDep = Annotated[Settings, Depends(_settings)]
+StateDep = Annotated[ServiceState, Depends(_state)]
 
 
 def iso(t: float) -> str:

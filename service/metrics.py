@@ -1,13 +1,20 @@
-"""Prometheus metrics: in-process counters plus gauges read from the database at scrape time."""
+"""Prometheus metrics: in-process counters plus gauges read from the database at scrape time.
+
+``/metrics`` shows a caller only what its key may read (:meth:`Metrics.exposition`): series with
+a ``spacecraft`` label for the spacecraft it may read; fleet-wide series (jobs by status, ingest
+and retraining totals) only to keys that may read every spacecraft (``read:*`` or ``admin``),
+the scope to give a Prometheus scraper.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import sqlalchemy as sa
-from prometheus_client import CollectorRegistry, Counter, Histogram
+from prometheus_client import CollectorRegistry, Counter, Histogram, generate_latest
 from prometheus_client.core import GaugeMetricFamily
+from prometheus_client.metrics_core import Metric
 from prometheus_client.registry import Collector
 from sqlalchemy.engine import Engine
 
@@ -119,3 +126,39 @@ class Metrics:
             registry=self.registry,
         )
         self.registry.register(_DatabaseCollector(engine))
+
+    def exposition(self, *, may_read: Callable[[str], bool], fleet: bool) -> bytes:
+        """The Prometheus text of what a caller may see.
+
+        ``may_read(spacecraft)`` says whether a series labelled with that spacecraft is shown;
+        ``fleet`` whether the series without a spacecraft label (totals over the fleet) are.
+        """
+        return generate_latest(_Scoped(self.registry, may_read, fleet))  # type: ignore[arg-type]
+
+
+class _Scoped:
+    """A registry's families with the samples a caller may see (duck-typed for generate_latest)."""
+
+    def __init__(
+        self, registry: CollectorRegistry, may_read: Callable[[str], bool], fleet: bool
+    ) -> None:
+        self.registry = registry
+        self.may_read = may_read
+        self.fleet = fleet
+
+    def collect(self) -> Iterator[Metric]:
+        for family in self.registry.collect():
+            kept = [
+                s
+                for s in family.samples
+                if (
+                    self.may_read(s.labels["spacecraft"])
+                    if "spacecraft" in s.labels
+                    else self.fleet
+                )
+            ]
+            if not kept:
+                continue
+            out = Metric(family.name, family.documentation, family.type, family.unit)
+            out.samples = kept
+            yield out

@@ -7,9 +7,12 @@ Two kinds of bucket:
   refilled at ``rate_per_s``; requests without a key are bucketed per client address.
 * **failed authentication**: every ``401`` answer takes a token from the bucket of the client's
   address (``auth_fail_burst``, refilled at ``auth_fail_per_s``). While that bucket is empty,
-  every request from the address is answered 429 before it reaches authentication. A client
-  sending a fresh wrong key each time therefore cannot bypass the limiter by getting a fresh
-  request bucket per key: its failures are counted where it cannot change them, its address.
+  the request is marked (:data:`AUTH_THROTTLE`) and goes on to authentication, which answers a
+  failure 429 instead of 401 and lets a valid key through: one cron job with an expired key
+  must not lock its whole host (or everyone behind one proxy) out. A client sending a fresh
+  wrong key each time cannot bypass the limiter by getting a fresh request bucket per key: its
+  failures are counted where it cannot change them, its address (the real one behind a trusted
+  proxy, ``ORBITCAL_FORWARDED_ALLOW_IPS``).
 
 ``/healthz`` is never limited. An empty bucket answers ``429`` with ``Retry-After`` (whole seconds
 until one request is allowed again).
@@ -39,7 +42,18 @@ from typing import Any, Protocol
 from starlette.responses import JSONResponse
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-__all__ = ["Buckets", "MemoryBuckets", "RateLimit", "RedisBuckets"]
+__all__ = [
+    "AUTH_THROTTLE",
+    "Buckets",
+    "MemoryBuckets",
+    "RateLimit",
+    "RedisBuckets",
+    "retry_after_s",
+]
+
+#: Key of ``scope["state"]`` set while the client's failed-authentication bucket is empty: the
+#: 429 detail and the seconds until a failure is allowed again (read by ``service.auth``).
+AUTH_THROTTLE = "orbitcal.auth_throttle"
 
 log = logging.getLogger("orbitcal.service.ratelimit")
 
@@ -150,8 +164,13 @@ class RedisBuckets:
         await self._client.aclose()
 
 
+def retry_after_s(wait_s: float) -> int:
+    """Whole seconds of ``Retry-After`` for a wait [s] (at least 1)."""
+    return max(1, math.ceil(wait_s))
+
+
 def _too_many(detail: str, wait_s: float) -> JSONResponse:
-    seconds = max(1, math.ceil(wait_s))
+    seconds = retry_after_s(wait_s)
     return JSONResponse(
         {"detail": f"{detail}; retry after {seconds} s", "errors": []},
         status_code=429,
@@ -197,14 +216,12 @@ class RateLimit:
         requests, failures = self._identities(scope)
         if self.fail_rate > 0:
             wait = await self.store.take(failures, self.fail_rate, self.fail_burst, cost=0.0)
-            if wait > 0:
-                response = _too_many(
+            if wait > 0:  # authentication refuses failures with 429; valid keys pass
+                scope.setdefault("state", {})[AUTH_THROTTLE] = (
                     f"too many failed authentications from this address (limit "
                     f"{self.fail_rate:g}/s after {self.fail_burst:g})",
                     wait,
                 )
-                await response(scope, receive, send)
-                return
         wait = await self.store.take(requests, self.rate, self.burst, cost=1.0)
         if wait > 0:
             response = _too_many(f"rate limit of {self.rate:g} requests/s per key exceeded", wait)

@@ -35,8 +35,9 @@ class Settings(BaseSettings):
     #: default with room for a busy ground station (uploads come in batches of 10^3–10^5 rows).
     rate_limit_per_s: float = Field(default=200.0, ge=0)
     rate_limit_burst: int = Field(default=1000, ge=1)
-    #: Failed authentications (401 answers) allowed per client address [1/s] after a burst; an
-    #: address that exhausts them gets 429 on every request until its bucket refills (0: off).
+    #: Failed authentications (401 answers) allowed per client address [1/s] after a burst; once
+    #: an address has exhausted them, its failed authentications are answered 429 instead of 401
+    #: until the bucket refills (0: off). A valid key is never refused by this limit.
     auth_fail_per_s: float = Field(default=1.0, ge=0)
     auth_fail_burst: int = Field(default=100, ge=1)
     #: Redis URL of the buckets shared by every API process (``redis://host:6379/1``); empty:
@@ -45,6 +46,30 @@ class Settings(BaseSettings):
 
     #: Largest request body accepted [bytes]; larger ones get 413.
     max_body_bytes: int = 64 * 1024 * 1024
+
+    #: The HTTP server's own limits (``service.http``; docs/reliability.md). The request line and
+    #: headers together may hold at most ``max_header_bytes`` and ``max_header_count`` fields
+    #: (431 beyond, read no further); they must arrive within ``header_timeout_s`` of the
+    #: connection opening (or of the request's first byte on a kept-alive connection), and a
+    #: body may pause at most ``body_idle_timeout_s`` between two pieces and take at most
+    #: ``body_timeout_s`` in all (408, nothing stored). On SIGTERM, uploads still arriving get
+    #: half of ``shutdown_timeout_s`` to finish, requests being processed the whole of it; then
+    #: the process stops. More than ``max_connections`` open connections get 503.
+    max_header_bytes: int = Field(default=64 * 1024, ge=1024, le=16 * 1024 * 1024)
+    max_header_count: int = Field(default=100, ge=8, le=10_000)
+    header_timeout_s: float = Field(default=10.0, gt=0, le=3600)
+    body_idle_timeout_s: float = Field(default=30.0, gt=0, le=3600)
+    body_timeout_s: float = Field(default=600.0, gt=0, le=86400)
+    shutdown_timeout_s: float = Field(default=10.0, gt=0, le=3600)
+    max_connections: int = Field(default=1000, ge=1)
+    #: Proxies whose ``X-Forwarded-For``/``X-Forwarded-Proto`` are believed (comma-separated
+    #: addresses or networks, ``*`` for any; uvicorn's ``--forwarded-allow-ips`` semantics). The
+    #: client address the rate limiter sees is then the one the proxy reports. Empty (the
+    #: default): no proxy is trusted and the headers are ignored.
+    forwarded_allow_ips: str = ""
+    #: Largest size of a SQLite database [bytes] (``PRAGMA max_page_count``); 0: unlimited. A
+    #: write beyond it answers 503 "disk full" like a full file system.
+    sqlite_max_bytes: int = Field(default=0, ge=0)
 
     #: Retraining defaults.
     method: str = "linear"

@@ -11,8 +11,10 @@ UTC (Unix convention, leap seconds not counted) so that equality is exact.
 from __future__ import annotations
 
 import contextlib
+import errno
 import hashlib
 import json
+import os
 import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -38,6 +40,7 @@ __all__ = [
     "IngestLog",
     "Job",
     "Quarantine",
+    "ResourceExhausted",
     "RetrainLock",
     "Sample",
     "SampleArrays",
@@ -46,6 +49,7 @@ __all__ = [
     "bump_data_revision",
     "count_samples",
     "delete_samples",
+    "find_window",
     "hash_key",
     "insert_samples",
     "log_upload",
@@ -55,6 +59,7 @@ __all__ = [
     "read_tx",
     "read_window",
     "release_lock",
+    "resource_problem",
     "sample_times",
     "upgrade",
     "write_tx",
@@ -282,8 +287,12 @@ def normalise_url(url: str) -> str:
     return url
 
 
-def make_engine(url: str, *, sqlite_synchronous: str = "FULL") -> Engine:
-    """Engine with WAL, a busy timeout and foreign keys on SQLite; pre-ping on PostgreSQL."""
+def make_engine(url: str, *, sqlite_synchronous: str = "FULL", sqlite_max_bytes: int = 0) -> Engine:
+    """Engine with WAL, a busy timeout and foreign keys on SQLite; pre-ping on PostgreSQL.
+
+    ``sqlite_max_bytes`` > 0 caps the SQLite file (``PRAGMA max_page_count``): a write beyond it
+    fails as on a full disk ("database or disk is full").
+    """
     url = normalise_url(url)
     if url.startswith("sqlite"):
         engine = sa.create_engine(
@@ -303,6 +312,9 @@ def make_engine(url: str, *, sqlite_synchronous: str = "FULL") -> Engine:
             cur.execute(f"PRAGMA synchronous={sqlite_synchronous}")
             cur.execute("PRAGMA foreign_keys=ON")
             cur.execute("PRAGMA busy_timeout=30000")
+            if sqlite_max_bytes > 0:
+                page_size = int(cur.execute("PRAGMA page_size").fetchone()[0])
+                cur.execute(f"PRAGMA max_page_count={max(1, sqlite_max_bytes // page_size)}")
             cur.close()
 
         @event.listens_for(engine, "begin")
@@ -576,6 +588,30 @@ def _dense_latest_window(
     return Window(end - window_s, end, n, {"future": int(n_future)} if n_future else {})
 
 
+def find_window(
+    conn: Connection,
+    spacecraft_pk: int,
+    *,
+    window_s: float,
+    min_samples: int,
+    now_utc_s: float,
+) -> Any:
+    """The window of samples a retraining would read now (times only, no sample read)."""
+    from orbitcal.pipeline import FUTURE_TOLERANCE_S, training_window
+
+    window = _dense_latest_window(
+        conn, spacecraft_pk, window_s, min_samples, now_utc_s + FUTURE_TOLERANCE_S
+    )
+    if window is None:  # the latest stretch is sparse: scan every sample time
+        window = training_window(
+            sample_times(conn, spacecraft_pk),
+            window_s=window_s,
+            min_samples=min_samples,
+            now_utc_s=now_utc_s,
+        )
+    return window
+
+
 def read_window(
     conn: Connection,
     spacecraft_pk: int,
@@ -589,18 +625,11 @@ def read_window(
 
     ``window.excluded`` also counts the quarantined samples inside the window.
     """
-    from orbitcal.pipeline import FUTURE_TOLERANCE_S, Window, training_window
+    from orbitcal.pipeline import Window
 
-    window = _dense_latest_window(
-        conn, spacecraft_pk, window_s, min_samples, now_utc_s + FUTURE_TOLERANCE_S
+    window = find_window(
+        conn, spacecraft_pk, window_s=window_s, min_samples=min_samples, now_utc_s=now_utc_s
     )
-    if window is None:  # the latest stretch is sparse: scan every sample time
-        window = training_window(
-            sample_times(conn, spacecraft_pk),
-            window_s=window_s,
-            min_samples=min_samples,
-            now_utc_s=now_utc_s,
-        )
     if window.end_utc_s is None:
         return window, SampleArrays(np.zeros(0), {c: np.zeros(0) for c in SAMPLE_COLUMNS}, {})
     samples = read_samples(
@@ -688,6 +717,70 @@ class CommitOutcomeUnknown(sa.exc.SQLAlchemyError):
     """
 
 
+class ResourceExhausted(sa.exc.SQLAlchemyError):
+    """The database failed for want of a resource of this machine: nothing was stored.
+
+    ``resource`` names it for the operator: ``"disk"`` (ENOSPC, SQLite "database or disk is
+    full", PostgreSQL 53100), ``"open files"`` (EMFILE/ENFILE) or ``"database connections"``
+    (PostgreSQL 53300). The server answered the failing statement or COMMIT, so the
+    transaction was rolled back (unlike :class:`CommitOutcomeUnknown`).
+    """
+
+    def __init__(self, resource: str, message: str) -> None:
+        super().__init__(message)
+        self.resource = resource
+
+
+#: PostgreSQL SQLSTATEs of class 53 (insufficient resources) and what runs out.
+_PG_RESOURCE_STATES = {
+    "53100": "disk",
+    "53200": "memory",
+    "53300": "database connections",
+}
+_ERRNO_RESOURCES = {errno.ENOSPC: "disk", errno.EMFILE: "open files", errno.ENFILE: "open files"}
+
+
+def _out_of_file_descriptors() -> bool:
+    """Whether this process can open no more files right now (EMFILE/ENFILE)."""
+    try:
+        fd = os.open(os.devnull, os.O_RDONLY)
+    except OSError as exc:
+        return exc.errno in (errno.EMFILE, errno.ENFILE)
+    os.close(fd)
+    return False
+
+
+def resource_problem(exc: BaseException) -> str | None:
+    """The machine resource whose exhaustion caused ``exc`` (``"disk"``, ``"open files"``, …).
+
+    Looks through SQLAlchemy's wrapper at the driver's error and its chain: an ``OSError``'s
+    errno, SQLite's "database or disk is full" (or "unable to open database file" while this
+    process is out of file descriptors), PostgreSQL's SQLSTATE class 53. None when ``exc`` is
+    something else.
+    """
+    seen: set[int] = set()
+    error: BaseException | None = exc
+    while error is not None and id(error) not in seen:
+        seen.add(id(error))
+        if isinstance(error, ResourceExhausted):
+            return error.resource
+        if isinstance(error, OSError) and error.errno in _ERRNO_RESOURCES:
+            return _ERRNO_RESOURCES[error.errno]
+        state = getattr(error, "sqlstate", None) or getattr(error, "pgcode", None)
+        if isinstance(state, str) and state in _PG_RESOURCE_STATES:
+            return _PG_RESOURCE_STATES[state]
+        text = str(error).lower()
+        if "database or disk is full" in text or "no space left on device" in text:
+            return "disk"
+        if "too many open files" in text or (
+            "unable to open database file" in text and _out_of_file_descriptors()
+        ):
+            return "open files"
+        nxt = getattr(error, "orig", None)
+        error = nxt if isinstance(nxt, BaseException) else (error.__cause__ or error.__context__)
+    return None
+
+
 @contextlib.contextmanager
 def write_tx(engine: Engine) -> Iterator[Connection]:
     """A write transaction, committed on exit (SQLite: ``BEGIN IMMEDIATE``).
@@ -712,6 +805,10 @@ def write_tx(engine: Engine) -> Iterator[Connection]:
         try:
             tx.commit()
         except sa.exc.DBAPIError as exc:
+            resource = resource_problem(exc)
+            if resource is not None and not exc.connection_invalidated:
+                # the database answered COMMIT with the failure: rolled back, nothing stored
+                raise ResourceExhausted(resource, str(exc.orig)) from exc
             if exc.connection_invalidated or isinstance(
                 exc, sa.exc.OperationalError | sa.exc.InterfaceError
             ):

@@ -59,6 +59,13 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "ORBITCAL_RATE_LIMIT_REDIS_URL (shared buckets) or ORBITCAL_RATE_LIMIT_PER_S=0, and one "
         "process per database runs the scheduler",
     )
+    p.add_argument(
+        "--forwarded-allow-ips",
+        metavar="IPS",
+        default=None,
+        help="proxies whose X-Forwarded-For names the client (comma-separated addresses or "
+        "networks, '*' for any; default ORBITCAL_FORWARDED_ALLOW_IPS, empty: none)",
+    )
     p.set_defaults(func=run)
 
 
@@ -76,6 +83,8 @@ def settings_from_args(args: argparse.Namespace) -> Any:
         overrides["job_backend"] = args.job_backend
     if getattr(args, "workers", None):
         overrides["workers"] = args.workers
+    if getattr(args, "forwarded_allow_ips", None) is not None:
+        overrides["forwarded_allow_ips"] = args.forwarded_allow_ips
     return Settings(**overrides)
 
 
@@ -85,6 +94,7 @@ def run(args: argparse.Namespace) -> int:
     from orbitcal.cli import CliError
     from service.app import create_app
     from service.auth import is_loopback
+    from service.http import uvicorn_options
     from service.logs import redact_url
 
     settings = settings_from_args(args)
@@ -118,6 +128,7 @@ def run(args: argparse.Namespace) -> int:
                 "ORBITCAL_SCHEDULER": str(settings.scheduler).lower(),
                 "ORBITCAL_JOB_BACKEND": settings.job_backend,
                 "ORBITCAL_WORKERS": str(settings.workers),
+                "ORBITCAL_FORWARDED_ALLOW_IPS": settings.forwarded_allow_ips,
             }
         )
         uvicorn.run(
@@ -131,7 +142,15 @@ def run(args: argparse.Namespace) -> int:
             # uvicorn kills a worker that does not answer its health ping within this time; a
             # retraining or diagnosis holding the GIL on a busy machine must not cost the worker
             timeout_worker_healthcheck=120,
+            **uvicorn_options(settings),
         )
         return 0
-    uvicorn.run(app, host=args.host, port=args.port, log_level="warning", access_log=False)
+    uvicorn.run(
+        app,
+        host=args.host,
+        port=args.port,
+        log_level="warning",
+        access_log=False,
+        **uvicorn_options(settings),
+    )
     return 0

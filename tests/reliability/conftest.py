@@ -5,10 +5,28 @@ from __future__ import annotations
 import json
 import os
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import pytest
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_call(item: Any) -> Iterator[None]:
+    """A test that fails marks the probes it recorded as failed (those recorded outside
+    ``ServeProcess.run`` too), so that the summary's ``failed`` column counts them."""
+    probes = sys.modules.get("probes")
+    start = len(probes.RESULTS) if probes is not None else 0
+    outcome = yield
+    probes = sys.modules.get("probes")
+    excinfo = outcome.excinfo  # type: ignore[attr-defined]
+    if probes is not None and excinfo is not None:
+        for result in probes.RESULTS[start:]:
+            if not result.failure:
+                result.failure = f"{excinfo[0].__name__}: {excinfo[1]}"[:500] or "failed"
 
 
 def pytest_terminal_summary(terminalreporter: Any) -> None:
