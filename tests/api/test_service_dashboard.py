@@ -285,7 +285,41 @@ def test_diagnosis_report_html(fleet: Fleet) -> None:
         finally:
             _set_report(fleet.server, None)
     assert r.status_code == 200 and r.headers["content-type"].startswith("text/html")
-    assert "Verdict: <b>time_offset</b>" in r.text and "7.69" in r.text
+    assert 'data-verdict="time_offset"' in r.text and "7.69" in r.text
+    # the same page as the command line's for the same JSON (one renderer, JSON only)
+    from orbitcal.diagnose.html_report import report_html
+
+    assert r.text == report_html(_report(), title="orbitcal diagnosis of swarm-a")
+
+
+def test_latest_diagnosis_is_an_empty_state_not_a_404(fleet: Fleet) -> None:
+    _set_report(fleet.server, None)
+    with fleet.server.client() as c:
+        assert c.get("/v1/spacecraft/swarm-a/diagnosis/latest").json() == {
+            "state": "none",
+            "report": None,
+        }
+        assert c.get("/v1/spacecraft/nosuch/diagnosis/latest").status_code == 404
+        _set_report(fleet.server, _report())
+        try:
+            latest = c.get("/v1/spacecraft/swarm-a/diagnosis/latest").json()
+        finally:
+            _set_report(fleet.server, None)
+    assert latest == {"state": "ready", "report": _report()}
+
+
+def test_a_none_verdict_page_never_says_none_none(fleet: Fleet) -> None:
+    report = _report()
+    report.update(verdict="none", verdict_status="none", verdict_confidence=1.0)
+    report["effects"][0]["significant"] = False
+    _set_report(fleet.server, report)
+    try:
+        with fleet.server.client() as c:
+            page = c.get("/v1/spacecraft/swarm-a/diagnosis/report.html").text
+    finally:
+        _set_report(fleet.server, None)
+    assert "No unmodelled effect found" in page
+    assert "none (none" not in page and "confidence 100" not in page
 
 
 # --- in chromium -----------------------------------------------------------------------------
@@ -469,16 +503,19 @@ def test_dashboard_in_chromium(fleet: Fleet, tmp_path: Path) -> None:
         opened = browser.wait_for("window.openedUrl")
         assert opened.startswith("blob:")
         report_page = browser.evaluate(f"fetch('{opened}').then(r => r.text())")
-        assert "Verdict: <b>time_offset</b>" in report_page
+        assert 'data-verdict="time_offset"' in report_page
         shot = browser.screenshot(tmp_path / "dashboard-network-calibration.png")
         external = browser.external_requests(server.url)
         errors = list(browser.console_errors)
+        failed = list(browser.error_responses)
     _set_report(server, None)
     keep_screenshot(shot)
     keep_screenshot(tmp_path / "dashboard-no-diagnosis.png")
     keep_screenshot(tmp_path / "dashboard-empty-spacecraft.png")
     assert external == [], external
     assert errors == [], errors
+    # no favicon 404 on any load, no 404 for "no diagnosis yet" (an empty state, not an error)
+    assert [u for u in failed if "favicon" in u or "/diagnosis" in u] == [], failed
 
 
 @pytest.mark.browser
@@ -506,7 +543,9 @@ def test_dashboard_with_authentication_off(tmp_path: Path) -> None:
             )
             shot = browser.screenshot(tmp_path / "dashboard-auth-off.png")
             external = browser.external_requests(server.url)
+            failed = list(browser.error_responses)
     keep_screenshot(shot)
+    assert [u for u in failed if "favicon" in u or "/diagnosis" in u] == [], failed
     assert state == {
         "banner": True,
         "notice": True,
