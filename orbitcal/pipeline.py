@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -35,6 +35,9 @@ from orbitcal.calibrate.holdout import later_block_split
 from orbitcal.errors import BadInputError, NotEnoughDataError
 from orbitcal.metrics import norm_rms_nt, primary_key, rms_nt, scalar_rms_nt
 from orbitcal.telemetry import Telemetry
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = [
     "EXCLUSION_REASONS",
@@ -325,6 +328,28 @@ class CalibrationRun:
         return (
             METHODS[self.calibration.method].vector if self.calibration.method in METHODS else True
         )
+
+    def to_frame(self) -> pd.DataFrame:
+        """Per sample by UTC time: held out or not, raw, calibrated, residual [nT]
+        (:func:`orbitcal.notebook.run_frame`)."""
+        from orbitcal.notebook import run_frame
+
+        return run_frame(self)
+
+    def to_xarray(self) -> Any:
+        """:meth:`to_frame` as an xarray Dataset (needs the optional xarray)."""
+        from orbitcal.notebook import frame_to_xarray
+
+        doc = self.document
+        return frame_to_xarray(
+            self.to_frame(),
+            attrs={"method": str(doc.get("method")), "spacecraft": str(doc.get("spacecraft"))},
+        )
+
+    def __repr__(self) -> str:
+        from orbitcal.notebook import run_repr
+
+        return run_repr(self)
 
 
 def calibrate(
