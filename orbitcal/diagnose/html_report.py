@@ -596,7 +596,7 @@ def _where_rows(where: dict[str, Any] | None, final: dict[str, Any] | None) -> l
         a = after.get(tuple(b.get("band_deg", [])), {})
         rows.append(
             [
-                f"|mlat| {format_number(lo)}–{format_number(hi)}°",
+                f"|mlat| {_tick(float(lo or 0))}–{_tick(float(hi or 0))}°",
                 str(b.get("n", "")),
                 format_number(b.get("rms_nt")),
                 format_number(a.get("rms_nt")),
