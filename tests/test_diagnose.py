@@ -125,7 +125,7 @@ def test_split_fit_exposes_drift_by_time_blocks() -> None:
 
 def test_report_has_the_contract_keys_and_html_renders() -> None:
     world = make_world("external_field", attitude="tumbling", seed=7)
-    report, att = diagnose_parts(world.data, rng=np.random.default_rng(0))
+    report, _att = diagnose_parts(world.data, rng=np.random.default_rng(0))
     json.dumps(report, allow_nan=False)  # JSON-ready, no NaN
     assert set(report["baseline"]) >= {"method", "holdout_rms_nt"}
     assert report["verdict"] == "external_field"
