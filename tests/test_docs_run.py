@@ -143,8 +143,8 @@ def _in(tmp: Path, text: str) -> str:
     return text.replace("/tmp/", f"{tmp}/")
 
 
-@pytest.mark.slow  # 1-3 min: simulate, calibrate, diagnose, reproduce, serve and retrain
-@pytest.mark.timeout(900)
+@pytest.mark.slow  # minutes: simulate, calibrate (lmbp-hk), diagnose, reproduce, serve, retrain
+@pytest.mark.timeout(2400)
 def test_readme_first_session_notebook_and_http_run(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
