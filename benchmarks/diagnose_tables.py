@@ -136,7 +136,7 @@ def update(page: Path, directories: list[str]) -> None:
     for run in runs:
         seed = run["settings"]["seed"]
         target = page.parent / f"diagnose_results_seed{seed}.json"
-        target.write_text(json.dumps(run, indent=0, sort_keys=True) + "\n")
+        target.write_text(json.dumps(run, indent=0) + "\n")
     first = Path(directories[0])
     for name in ("diagnose_confusion.json", "diagnose_confusion.png"):
         if (first / name).exists():

@@ -89,3 +89,26 @@ def test_update_writes_the_tables_between_the_markers_and_keeps_the_results(
     assert text[text.index(tables.END) :] == page[page.index(tables.END) :]
     kept = json.loads((tmp_path / "diagnose_results_seed0.json").read_text())
     assert tables.tables([kept, _run(1, 0.97)]).strip() == block.strip()
+
+
+def test_the_page_holds_the_scripts_output_on_the_kept_results() -> None:
+    tables = _script()
+    page = PAGE.read_text()
+    shown = page[page.index(tables.BEGIN) + len(tables.BEGIN) : page.index(tables.END)]
+    kept = sorted(PAGE.parent.glob("diagnose_results_seed*.json"))
+    runs = sorted((json.loads(p.read_text()) for p in kept), key=lambda r: r["settings"]["seed"])
+    assert runs, "no kept benchmark results beside benchmarks/results/diagnose.md"
+    assert shown.strip() == tables.tables(runs).strip()
+
+
+def test_the_readme_quotes_the_kept_seed_0_run() -> None:
+    s = json.loads((PAGE.parent / "diagnose_results_seed0.json").read_text())["summary"]
+    row = next(
+        line for line in (ROOT / "README.md").read_text().splitlines()
+        if line.startswith("| blind diagnosis")
+    )  # fmt: skip
+    assert f"{100 * s['top1']:.1f} % top-1 ({100 * s['top1_strict']:.1f} % strict)" in row, row
+    assert f"lowest effect ≥ {int(100 * s['min_top1_per_effect'])} %" in row, row
+    assert f"{100 * s['false_alarm_rate']:.0f} false alarms" in row or (
+        s["false_alarm_rate"] == 0 and "0 false alarms" in row
+    ), row
