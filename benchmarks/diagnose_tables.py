@@ -1,8 +1,14 @@
 """Markdown tables of a blind-diagnosis benchmark run (``orbitcal bench diagnose --out DIR``).
 
 ``python benchmarks/diagnose_tables.py DIR [DIR ...]`` prints the headline, per-effect and misses
-tables of the first run and one summary line per further run (other seeds), for
-``benchmarks/results/diagnose.md``.
+tables of the first run and one summary line per further run (other seeds).
+
+``python benchmarks/diagnose_tables.py --update benchmarks/results/diagnose.md DIR [DIR ...]``
+writes them into that file between its ``<!-- diagnose_tables: begin -->`` and
+``<!-- diagnose_tables: end -->`` markers and keeps each run's ``diagnose_results.json`` beside it
+as ``diagnose_results_seed<S>.json`` (and the first run's ``diagnose_confusion.{json,png}``): the
+figures of the page are the script's output on committed results, and
+``tests/test_diagnose_tables.py`` checks that they still are.
 """
 
 from __future__ import annotations
@@ -88,22 +94,63 @@ def summary_line(run: dict[str, Any]) -> str:
     )
 
 
+BEGIN = "<!-- diagnose_tables: begin -->"
+END = "<!-- diagnose_tables: end -->"
+
+
+def machine_line(run: dict[str, Any]) -> str:
+    m, st = run.get("machine", {}), run.get("settings", {})
+    return (
+        f"Run: `orbitcal bench diagnose --cases {st.get('n_cases', '?')} --seed "
+        f"{st.get('seed', '?')}`; machine {m.get('platform', '?')}, Python {m.get('python', '?')}, "
+        f"wall time {m.get('wall_seconds', float('nan')):.0f} s."
+    )
+
+
+def tables(runs: list[dict[str, Any]]) -> str:
+    """The generated part of benchmarks/results/diagnose.md."""
+    parts = [
+        machine_line(runs[0]),
+        "\n## Headline\n",
+        headline(runs[0]),
+        "\n## Per effect\n",
+        per_effect(runs[0]),
+        "\n## Misses\n",
+        misses(runs[0]),
+        "\n## Every seed run with this code\n",
+        "| seed | top-1 | lowest per effect | null false alarms | shrink/oracle | wall [s] |",
+        "|---|---|---|---|---|---|",
+        *[summary_line(run) for run in runs],
+    ]
+    return "\n".join(parts)
+
+
+def update(page: Path, directories: list[str]) -> None:
+    """Rewrite the marked part of ``page`` and keep the runs' results beside it."""
+    import shutil
+
+    runs = [_load(d) for d in directories]
+    text = page.read_text()
+    start, end = text.index(BEGIN), text.index(END)
+    page.write_text(text[: start + len(BEGIN)] + "\n" + tables(runs) + "\n" + text[end:])
+    for run in runs:
+        seed = run["settings"]["seed"]
+        target = page.parent / f"diagnose_results_seed{seed}.json"
+        target.write_text(json.dumps(run, indent=0) + "\n")
+    first = Path(directories[0])
+    for name in ("diagnose_confusion.json", "diagnose_confusion.png"):
+        if (first / name).exists():
+            shutil.copy(first / name, page.parent / name)
+
+
 def main(argv: list[str]) -> int:
-    if not argv:
+    if argv[:1] == ["--update"] and len(argv) >= 3:
+        update(Path(argv[1]), argv[2:])
+        return 0
+    if not argv or argv[0].startswith("-"):
         print(__doc__)
         return 2
-    runs = [_load(d) for d in argv]
-    print("## Headline\n")
-    print(headline(runs[0]))
-    print("\n## Per effect\n")
-    print(per_effect(runs[0]))
-    print("\n## Misses\n")
-    print(misses(runs[0]))
-    print("\n## Every seed\n")
-    print("| seed | top-1 | lowest per effect | null false alarms | shrink/oracle | wall [s] |")
-    print("|---|---|---|---|---|---|")
-    for run in runs:
-        print(summary_line(run))
+    print(tables([_load(d) for d in argv]))
     return 0
 
 

@@ -69,7 +69,7 @@ def read_table(source: str | Path | pd.DataFrame, *, time_scale: str = "UTC") ->
     if isinstance(source, str | Path):
         result = read_telemetry(source, time_scale=time_scale)
     else:
-        result = from_frame(source, time_scale=time_scale)
+        result = from_frame(_time_as_column(source), time_scale=time_scale)
     if result.rejected:
         first = result.rejected[0]
         warnings.warn(
@@ -81,6 +81,32 @@ def read_table(source: str | Path | pd.DataFrame, *, time_scale: str = "UTC") ->
     if len(result.telemetry) == 0:
         raise TelemetryError("no valid rows in the table")
     return result.telemetry
+
+
+def _time_as_column(df: pd.DataFrame) -> pd.DataFrame:
+    """A frame whose times are its ``DatetimeIndex`` gets them as the contract's ``time`` column
+    (a tz-aware index is converted to UTC; a naive one is refused: its scale is unknown)."""
+    import numpy as np
+    import pandas as pd
+
+    from orbitcal.telemetry import TelemetryError
+
+    if "time" in df.columns:
+        return df
+    if isinstance(df.index, pd.DatetimeIndex):
+        if df.index.tz is None:
+            raise TelemetryError(
+                "the DataFrame's DatetimeIndex has no time zone: localize it "
+                "(df.index = df.index.tz_localize('UTC')) or give a 'time' column"
+            )
+        epoch = pd.Timestamp(0, tz="UTC")
+        seconds = (df.index.tz_convert("UTC") - epoch).total_seconds()
+        return df.reset_index(drop=True).assign(time=np.asarray(seconds, dtype=float))
+    raise TelemetryError(
+        "missing column 'time': a DataFrame carries the sample times as a 'time' column (ISO-8601 "
+        "with Z, or Unix seconds) or as a tz-aware DatetimeIndex"
+        + (f" (its index is a {type(df.index).__name__})" if len(df.index) else "")
+    )
 
 
 def load_orbit(
@@ -161,6 +187,7 @@ def calibrate_table(
     attitude_frame: str = "GCRS",
     holdout_fraction: float = 0.25,
     seed: int = 0,
+    spacecraft: str | None = None,
     **options: Any,
 ) -> CalibrationRun:
     """Fit a calibration on the earlier samples and score it on the later ones.
@@ -179,6 +206,9 @@ def calibrate_table(
         Share of the latest samples held out for the metrics (default 0.25).
     seed : int, keyword-only
         Seeds the fit's random start.
+    spacecraft : str, keyword-only
+        The document's ``spacecraft`` (default: the orbit's object name, else ``NORAD <id>``, else
+        ``"unnamed"``; as ``orbitcal calibrate --spacecraft``).
     **options
         Passed to the calibrator (``n_hidden``, ``restarts``, ``max_epochs``).
 
@@ -192,9 +222,14 @@ def calibrate_table(
 
     from orbitcal.pipeline import calibrate
 
+    if spacecraft is None:
+        name = str(getattr(orbit, "name", "") or "").strip()
+        norad = getattr(orbit, "norad_id", None)
+        spacecraft = name or (f"NORAD {norad}" if norad is not None else "unnamed")
     return calibrate(
         telemetry,
         orbit=orbit,
+        spacecraft=spacecraft,
         method=method,
         field=field,
         attitude_frame=attitude_frame,

@@ -10,7 +10,7 @@ the contract's quaternion convention (``orbitcal.attitude.frame_to_body``:
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -23,6 +23,8 @@ from orbitcal.frames import itrs_to_gcrs, itrs_to_spherical, nec_to_itrs
 from orbitcal.orbit import Propagator, require_valid
 
 if TYPE_CHECKING:
+    import pandas as pd
+
     from orbitcal.telemetry import Telemetry
 
 __all__ = [
@@ -195,6 +197,24 @@ class Truth:
     attitude_frame: str
     position_source: str
     eop_status: str = "observed"
+
+    def to_frame(self) -> pd.DataFrame:
+        """The field in every frame and the positions by UTC time
+        (:func:`orbitcal.notebook.truth_frame`)."""
+        from orbitcal.notebook import truth_frame
+
+        return truth_frame(self)
+
+    def to_xarray(self) -> Any:
+        """:meth:`to_frame` as an xarray Dataset (needs the optional xarray)."""
+        from orbitcal.notebook import frame_to_xarray
+
+        return frame_to_xarray(self.to_frame(), attrs={"field": self.field_name})
+
+    def __repr__(self) -> str:
+        from orbitcal.notebook import truth_repr
+
+        return truth_repr(self)
 
 
 def _eop_status(t: FloatArray) -> str:

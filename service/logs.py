@@ -35,12 +35,29 @@ class JsonFormatter(logging.Formatter):
         return json.dumps(out, default=str)
 
 
+def _level(level: str | int) -> int:
+    return level if isinstance(level, int) else logging.getLevelName(level.upper())
+
+
+class SkippedTickFilter(logging.Filter):
+    """Leaves out APScheduler's "skipped: maximum number of running instances reached": a
+    scheduler tick that finds the previous one still running is skipped on purpose
+    (``max_instances=1, coalesce=True`` in service/scheduler.py), not a fault to warn about."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return "maximum number of running instances reached" not in record.getMessage()
+
+
 def configure_logging(level: str = "INFO") -> None:
-    """JSON lines on stderr for the ``orbitcal`` loggers (idempotent)."""
-    logger = logging.getLogger("orbitcal")
-    logger.setLevel(level)
-    if not any(isinstance(h.formatter, JsonFormatter) for h in logger.handlers):
-        handler = logging.StreamHandler()
-        handler.setFormatter(JsonFormatter())
-        logger.addHandler(handler)
-        logger.propagate = False
+    """JSON lines on stderr for the ``orbitcal`` loggers and APScheduler's (idempotent)."""
+    for name in ("orbitcal", "apscheduler"):
+        logger = logging.getLogger(name)
+        # APScheduler says "running job ..." at INFO on every tick: its warnings only
+        logger.setLevel(level if name == "orbitcal" else max(logging.WARNING, _level(level)))
+        if not any(isinstance(h.formatter, JsonFormatter) for h in logger.handlers):
+            handler = logging.StreamHandler()
+            handler.setFormatter(JsonFormatter())
+            if name == "apscheduler":
+                handler.addFilter(SkippedTickFilter())
+            logger.addHandler(handler)
+            logger.propagate = False

@@ -126,9 +126,40 @@ def _one_line_warning(command: str) -> Callable[..., str]:
     return format_warning
 
 
+def _subparser(parser: argparse.ArgumentParser, command: str) -> argparse.ArgumentParser:
+    """The parser of sub-command ``command``."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            found: argparse.ArgumentParser = action.choices[command]
+            return found
+    return parser
+
+
+def unknown_arguments_message(parser: argparse.ArgumentParser, extra: Sequence[str]) -> str:
+    """``unrecognized arguments: …``, with the option meant for each unknown ``-x``/``--xyz``
+    when one of ``parser``'s options is close (difflib)."""
+    import difflib
+
+    options = [o for a in parser._actions for o in a.option_strings]
+    hints = []
+    for token in extra:
+        if not token.startswith("-"):
+            continue
+        flag = token.split("=", 1)[0]
+        close = difflib.get_close_matches(flag, options, n=1, cutoff=0.6)
+        if close:
+            hints.append(f"{flag}: did you mean {close[0]}?")
+    text = "unrecognized arguments: " + " ".join(extra)
+    return text + (" (" + "; ".join(hints) + ")" if hints else "")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    if extra:
+        # the sub-command's usage and the flag meant, not the top-level usage
+        sub = _subparser(parser, args.command)
+        sub.error(unknown_arguments_message(sub, extra))
     previous = warnings.formatwarning
     warnings.formatwarning = _one_line_warning(args.command)
     try:

@@ -99,12 +99,13 @@ def run(args: argparse.Namespace) -> int:
         )
         del tel, orbit  # the diagnosis holds what it needs of them
         trim_heap()
-        report, att = diagnose_parts(data, rng=np.random.default_rng(args.seed))
+        report, _att = diagnose_parts(data, rng=np.random.default_rng(args.seed))
         Path(args.out).write_text(json.dumps(report, indent=1) + "\n")
         if args.html:
-            Path(args.html).write_text(report_html(report, data=data, attribution=att))
+            Path(args.html).write_text(report_html(report))
     print(
         f"verdict: {report['verdict']}; held-out RMS {report['baseline']['holdout_rms_nt']} nT "
         f"-> {report['final']['holdout_rms_nt']} nT; report written to {args.out}"
+        + (f", HTML page to {args.html}" if args.html else "")
     )
     return 0

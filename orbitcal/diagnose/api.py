@@ -19,6 +19,7 @@ import numpy as np
 from orbitcal.arrays import FloatArray
 from orbitcal.diagnose.attribution import Attribution, attribute
 from orbitcal.diagnose.effects import DiagnosisData
+from orbitcal.diagnose.evidence import evidence
 from orbitcal.diagnose.prior import CalibrationPrior
 from orbitcal.diagnose.report import build_report
 from orbitcal.diagnose.track import along_track
@@ -247,7 +248,9 @@ def diagnose_parts(
             data, att.final_residual_nt, train=att.train, holdout=att.holdout, rng=rng
         )
         learned_result["fitted_to"] = "the final model's residual on the training blocks"
-    return build_report(data, att, where, learned=learned_result, where_final=where_final), att
+    report = build_report(data, att, where, learned=learned_result, where_final=where_final)
+    report["evidence"] = evidence(data, att)  # curves the HTML page draws (evidence.py)
+    return report, att
 
 
 #: Name of the crustal_field variant the seed-003 model stands for.

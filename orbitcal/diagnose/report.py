@@ -5,16 +5,12 @@ JSON keys of section 5 are written exactly: ``baseline {method, holdout_rms_nt}`
 (ranked, most explanatory first) and ``where {axis_rms_nt, ...}``. Supporting sections are added
 around them (``final``, ``split_fits``, ``learned``, ``data``).
 
-The HTML embeds matplotlib PNGs as base64 (shrink per effect, residual map along the ground track,
-residual by magnetic latitude, split-fit comparisons, residual in time), so it is one file.
+The HTML page is drawn from this JSON alone by :mod:`orbitcal.diagnose.html_report` (re-exported
+here as ``report_html``), so the command line and the service render the same page.
 """
 
 from __future__ import annotations
 
-import base64
-import html
-import io
-import json
 import math
 from typing import Any
 
@@ -22,6 +18,7 @@ import numpy as np
 
 from orbitcal.diagnose.attribution import Attribution
 from orbitcal.diagnose.effects import EFFECT_NAMES, DiagnosisData, get_effect
+from orbitcal.diagnose.html_report import report_html
 
 __all__ = ["BASELINE_METHOD", "build_report", "report_html"]
 
@@ -236,159 +233,4 @@ def _provenance(data: DiagnosisData, att: Attribution) -> dict[str, Any]:
         reference_field=data.reference_field,
         rc_index_used=data.rc_index_nt is not None,
         external_field_variant=variant,
-    )
-
-
-# ---- HTML --------------------------------------------------------------------------------------
-
-
-def _png(fig: Any) -> str:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
-    import matplotlib.pyplot as plt
-
-    plt.close(fig)
-    return base64.b64encode(buf.getvalue()).decode("ascii")
-
-
-def _figures(
-    report: dict[str, Any], data: DiagnosisData | None, att: Attribution | None
-) -> list[tuple[str, str]]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    figs: list[tuple[str, str]] = []
-    eff = report["effects"]
-    if eff:
-        fig, ax = plt.subplots(figsize=(7, 3))
-        names = [e["name"] for e in eff]
-        shr = [e["shrink"] or 0.0 for e in eff]
-        colors = ["tab:red" if e["significant"] else "tab:gray" for e in eff]
-        ax.barh(names[::-1], shr[::-1], color=colors[::-1])
-        ax.axvline(1.0, color="k", lw=0.8)
-        ax.set_xlabel("held-out shrink (before / after)")
-        ax.set_title("Shrink per candidate effect (red: selected)")
-        figs.append(("Shrink per effect", _png(fig)))
-    bands = report["where"].get("magnetic_latitude", [])
-    if bands:
-        fig, ax = plt.subplots(figsize=(7, 3))
-        labels = [f"{b['band_deg'][0]:g}-{b['band_deg'][1]:g}" for b in bands]
-        x = np.arange(len(bands))
-        ax.bar(x - 0.2, [b["rms_nt"] for b in bands], 0.4, label="vector")
-        ax.bar(x + 0.2, [b["scalar_rms_nt"] for b in bands], 0.4, label="scalar (along B)")
-        ax.set_xticks(x, labels)
-        ax.set_xlabel("|magnetic latitude| band [deg]")
-        ax.set_ylabel("residual RMS [nT]")
-        ax.legend()
-        figs.append(("Residual by magnetic latitude", _png(fig)))
-    if data is not None and att is not None:
-        r = att.baseline_residual_nt
-        lat = np.degrees(np.arcsin(data.r_itrs_km[:, 2] / np.linalg.norm(data.r_itrs_km, axis=1)))
-        lon = np.degrees(np.arctan2(data.r_itrs_km[:, 1], data.r_itrs_km[:, 0]))
-        fig, ax = plt.subplots(figsize=(8, 4))
-        sc = ax.scatter(lon, lat, c=np.linalg.norm(r, axis=1), s=4, cmap="viridis")
-        fig.colorbar(sc, ax=ax, label="|residual| [nT]")
-        ax.set_xlabel("longitude [deg]")
-        ax.set_ylabel("latitude [deg]")
-        ax.set_xlim(-180, 180)
-        ax.set_ylim(-90, 90)
-        ax.set_title("Baseline residual along the ground track")
-        figs.append(("Residual map", _png(fig)))
-        fig, ax = plt.subplots(figsize=(8, 3))
-        th = (data.t_utc_s - data.t_utc_s[0]) / 3600.0
-        ax.plot(th, np.linalg.norm(r, axis=1), lw=0.6, label="baseline")
-        ax.plot(
-            th, np.linalg.norm(att.final_residual_nt, axis=1), lw=0.6, label="with selected effects"
-        )
-        ax.axvspan(th[att.holdout][0], th[-1], color="0.9", label="held out")
-        ax.set_xlabel("time [h]")
-        ax.set_ylabel("|residual| [nT]")
-        ax.legend(loc="upper left")
-        figs.append(("Residual in time", _png(fig)))
-    splits = report.get("split_fits", [])
-    if splits:
-        fig, axes = plt.subplots(1, len(splits), figsize=(3.2 * len(splits), 3), squeeze=False)
-        for ax, s in zip(axes[0], splits, strict=True):
-            off = np.array(s["offsets_nt"], dtype=float)
-            off = off - off.mean(axis=0)
-            for k, axis in enumerate("xyz"):
-                ax.plot(range(len(off)), off[:, k], "o-", label=axis)
-            ax.set_xticks(range(len(off)), s["labels"], rotation=30, fontsize=7)
-            ax.set_title(f"{s['name']} (z={s['z']:.1f})", fontsize=9)
-            ax.set_ylabel("offset - mean [nT]")
-        axes[0][0].legend(fontsize=7)
-        figs.append(("Split fits", _png(fig)))
-    return figs
-
-
-def report_html(
-    report: dict[str, Any],
-    *,
-    data: DiagnosisData | None = None,
-    attribution: Attribution | None = None,
-    title: str = "orbitcal diagnosis",
-) -> str:
-    """A self-contained HTML page of a report (plots embedded as base64 PNG)."""
-
-    def interval(x: Any) -> str:
-        return "-" if not x else f"[{x[0]}, {x[1]}]"
-
-    def param_rows(e: dict[str, Any]) -> str:
-        iv = e.get("param_intervals_90") or {}
-        cells = "; ".join(
-            f"{html.escape(k)} = {v} {interval(iv.get(k))}"
-            for k, v in e["params"].items()
-            if isinstance(v, float | int) and not isinstance(v, bool)
-        )
-        return html.escape(cells[:600]) if cells else "-"
-
-    rows = "".join(
-        f"<tr><td>{html.escape(e['name'])}</td><td>{html.escape(e.get('status', ''))}</td>"
-        f"<td>{e['holdout_rms_before_nt']}</td><td>{e['holdout_rms_after_nt']}</td>"
-        f"<td>{e['shrink']} {interval(e.get('shrink_interval_90'))}</td><td>{e['p_value']}</td>"
-        f"<td style='font-size:80%'>{param_rows(e)}"
-        + (
-            f"<br><i>implausible: {html.escape(e['implausible_reason'])}</i>"
-            if e.get("implausible_reason")
-            else ""
-        )
-        + "</td></tr>"
-        for e in report["effects"]
-    )
-    sep = "".join(
-        f"<li>{html.escape(s['statement'])}; would separate it: "
-        f"{html.escape(s['would_separate'])}</li>"
-        for s in report.get("separation", [])
-    )
-    conf = report.get("verdict_confidence")
-    figs = "".join(
-        f"<h2>{html.escape(name)}</h2>"
-        f"<img alt='{html.escape(name)}' src='data:image/png;base64,{png}'/>"
-        for name, png in _figures(report, data, attribution)
-    )
-    where = html.escape(json.dumps(report["where"], indent=1)[:20000])
-    prov = report.get("provenance") or {}
-    prov_html = "".join(
-        f"<p><b>Warning:</b> {html.escape(w)}</p>" for w in prov.get("warnings", [])
-    )
-    prov_html += f"<h2>Tables used</h2><pre>{html.escape(json.dumps(prov, indent=1))}</pre>"
-    return (
-        "<!doctype html><html><head><meta charset='utf-8'>"
-        f"<title>{html.escape(title)}</title>"
-        "<style>body{font-family:sans-serif;max-width:960px;margin:auto}"
-        "td,th{padding:2px 8px;border-bottom:1px solid #ddd}</style></head><body>"
-        f"<h1>{html.escape(title)}</h1>"
-        f"<p>Verdict: <b>{html.escape(str(report['verdict']))}</b> "
-        f"({html.escape(str(report.get('verdict_status', '')))}; confidence "
-        f"{'-' if conf is None else f'{conf:.0%}'}). Baseline "
-        f"{html.escape(report['baseline']['method'])} held-out RMS "
-        f"{report['baseline']['holdout_rms_nt']} nT; with the selected effects "
-        f"{report['final']['holdout_rms_nt']} nT (shrink {report['final']['shrink']}).</p>"
-        + (f"<p>Not separable on this span:</p><ul>{sep}</ul>" if sep else "")
-        + "<table><tr><th>effect</th><th>status</th><th>before [nT]</th><th>after [nT]</th>"
-        "<th>shrink [90 % interval]</th><th>p</th><th>parameters [90 % intervals]</th></tr>"
-        f"{rows}</table>{figs}"
-        f"<h2>Where (JSON)</h2><pre>{where}</pre>{prov_html}</body></html>"
     )

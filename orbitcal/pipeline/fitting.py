@@ -9,7 +9,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, fields
 from dataclasses import field as dataclass_field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -22,6 +22,9 @@ from orbitcal.pipeline.determination import UndeterminedError, undetermined_reas
 from orbitcal.pipeline.inputs import fit_data_for_telemetry
 from orbitcal.pipeline.scores import Scores, score
 from orbitcal.telemetry import Telemetry
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = [
     "CalibrateOptions",
@@ -68,6 +71,28 @@ class CalibrationRun:
         return (
             METHODS[self.calibration.method].vector if self.calibration.method in METHODS else True
         )
+
+    def to_frame(self) -> pd.DataFrame:
+        """Per sample by UTC time: held out or not, raw, calibrated, residual [nT]
+        (:func:`orbitcal.notebook.run_frame`)."""
+        from orbitcal.notebook import run_frame
+
+        return run_frame(self)
+
+    def to_xarray(self) -> Any:
+        """:meth:`to_frame` as an xarray Dataset (needs the optional xarray)."""
+        from orbitcal.notebook import frame_to_xarray
+
+        doc = self.document
+        return frame_to_xarray(
+            self.to_frame(),
+            attrs={"method": str(doc.get("method")), "spacecraft": str(doc.get("spacecraft"))},
+        )
+
+    def __repr__(self) -> str:
+        from orbitcal.notebook import run_repr
+
+        return run_repr(self)
 
 
 @dataclass(frozen=True)

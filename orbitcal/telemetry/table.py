@@ -208,6 +208,19 @@ class Telemetry:
             data[name] = self.hk[name]
         return pd.DataFrame(data)
 
+    def to_xarray(self) -> Any:
+        """The table as an xarray Dataset indexed by UTC time (needs the optional xarray)."""
+        from orbitcal.notebook import frame_to_xarray, time_index
+
+        frame = self.to_frame().drop(columns="time")
+        frame.index = time_index(self.t_utc_s)
+        return frame_to_xarray(frame)
+
+    def __repr__(self) -> str:
+        from orbitcal.notebook import telemetry_repr
+
+        return telemetry_repr(self)
+
 
 @dataclass(frozen=True)
 class ReadResult:

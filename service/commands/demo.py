@@ -16,6 +16,7 @@ import sys
 import tempfile
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -84,44 +85,67 @@ def _batches(world: Any, rows_per_batch: int) -> list[tuple[bytes, str]]:
     return out
 
 
-def run(args: argparse.Namespace) -> int:
-    import httpx
-    import numpy as np
-    import uvicorn
+@dataclass
+class DemoWorld:
+    """The simulated spacecraft: its element set, telemetry, truth and sensor."""
+
+    tle: Any
+    world: Any
+    sensor: Any
+    t_change_utc_s: float
+    batches: list[tuple[bytes, str]]
+
+
+@dataclass
+class RunningService:
+    """The service in a thread of this process, on a free port of 127.0.0.1."""
+
+    server: Any
+    thread: threading.Thread
+    url: str
+
+    def stop(self) -> bool:
+        """Stop it; False when it did not stop within 30 s."""
+        self.server.should_exit = True
+        self.thread.join(timeout=30)
+        return not self.thread.is_alive()
+
+
+#: Why the version history differs from run to run (printed under the version table).
+TIMING_NOTE = (
+    "  Which uploads each version saw depends on when the scheduler's ticks fell between them "
+    "(wall-clock\n  time on this machine), so the number of versions can differ from run to "
+    "run; the version in\n  service at the end, fitted on the latest 6 h, does not."
+)
+
+
+def _settings(args: argparse.Namespace, db: Path, admin_key: str) -> Any:
     from pydantic import SecretStr
 
-    from orbitcal.cli import CliError
-    from orbitcal.data import real_tles_text
-    from orbitcal.metrics import rms_nt
-    from orbitcal.pipeline import apply_document
-    from orbitcal.sensor import SensorModel
-    from orbitcal.simulate import Tumbling, make_effect, select_tle, simulate_world
-    from orbitcal.timescales import utc_s_to_iso
-    from service.app import create_app
     from service.settings import Settings
 
-    if args.days <= 0.25:
-        raise CliError("--days must be more than 0.25")
-    workdir = Path(args.dir) if args.dir else Path(tempfile.mkdtemp(prefix="orbitcal-demo-"))
-    workdir.mkdir(parents=True, exist_ok=True)
-    db = workdir / "orbitcal.sqlite"
-    admin_key = "ock_demo_" + secrets.token_urlsafe(24)
-    cadence_s = 10.0
-    window_s = 6 * 3600.0
-    settings = Settings(
+    return Settings(
         database_url=f"sqlite:///{db}",
         admin_key=SecretStr(admin_key),
         bind_host="127.0.0.1",
         method=args.method,
-        window_s=window_s,  # sliding window: the latest 6 h of data
+        window_s=6 * 3600.0,  # sliding window: the latest 6 h of data
         min_new_samples=1800,  # retrain after 5 h of new data...
         cadence_s=2.0,  # ...at most every 2 s of wall time (simulated time runs fast)
         scheduler_tick_s=0.5,
         log_level="WARNING",
     )
 
-    # --- the simulated spacecraft (orbitcal.simulate on a real TLE) ---------------------------
-    # Swarm A's real CelesTrak set of 2022-08-01 (orbitcal/data, provenance in its README).
+
+def _simulate(args: argparse.Namespace) -> DemoWorld:
+    """Swarm A on its real CelesTrak set of 2022-08-01 (orbitcal/data, provenance in its README),
+    tumbling, with a sensor parameter change half-way (as in Wang et al. 2020)."""
+    import numpy as np
+
+    from orbitcal.data import real_tles_text
+    from orbitcal.sensor import SensorModel
+    from orbitcal.simulate import Tumbling, make_effect, select_tle, simulate_world
+
     tle = select_tle(real_tles_text(), norad_id=39452, at_utc_s=1659398400.0)
     start = float(np.floor(tle.epoch_utc_s / 86400.0) * 86400.0)
     rng = np.random.default_rng(args.seed)
@@ -134,12 +158,11 @@ def run(args: argparse.Namespace) -> int:
         scale_step=(0.01, -0.008, 0.006),
         step_at_fraction=change_at,
     )
-    duration_s = args.days * 86400.0
     world = simulate_world(
         tle,
         start_utc_s=start,
-        duration_s=duration_s,
-        cadence_s=cadence_s,
+        duration_s=args.days * 86400.0,
+        cadence_s=10.0,
         rng=rng,
         attitude=Tumbling(rate_body_deg_s=(0.05, -0.08, 0.11)),
         sensor=sensor,
@@ -148,12 +171,17 @@ def run(args: argparse.Namespace) -> int:
     )
     t_all = world.telemetry.t_utc_s
     t_change = float(t_all[0] + change_at * (t_all[-1] - t_all[0]))
-    batches = _batches(world, rows_per_batch=360)  # one hour per upload
+    return DemoWorld(tle, world, sensor, t_change, _batches(world, rows_per_batch=360))
 
-    # --- the service --------------------------------------------------------------------------
-    app = create_app(settings)
+
+def _start_service(settings: Any, port: int) -> RunningService:
+    import uvicorn
+
+    from orbitcal.cli import CliError
+    from service.app import create_app
+
     server = uvicorn.Server(
-        uvicorn.Config(app, host="127.0.0.1", port=args.port, log_level="warning")
+        uvicorn.Config(create_app(settings), host="127.0.0.1", port=port, log_level="warning")
     )
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()
@@ -162,72 +190,76 @@ def run(args: argparse.Namespace) -> int:
         if not thread.is_alive() or time.monotonic() > deadline:
             raise CliError("the service did not start")
         time.sleep(0.05)
-    port = server.servers[0].sockets[0].getsockname()[1]
-    url = f"http://127.0.0.1:{port}"
-    print(f"orbitcal demo: service at {url} (SQLite {db})")
-    print(
-        f"  spacecraft swarm-a on the real Swarm A TLE (NORAD {tle.norad_id}, epoch "
-        f"{utc_s_to_iso([tle.epoch_utc_s])[0][:19]}Z); {len(world.telemetry.t_utc_s)} "
-        f"samples at 0.1 Hz over {args.days:g} days; sensor parameters change at "
-        f"{utc_s_to_iso([t_change])[0][:19]}Z"
-    )
-    sc = "swarm-a"
-    try:
-        with httpx.Client(base_url=url, headers={"X-API-Key": admin_key}, timeout=60) as c:
-            r = c.post("/v1/spacecraft", json={"id": sc, "tle": tle.text})
-            if r.status_code != 201:
-                raise CliError(f"registering the spacecraft failed: {r.text}")
-            accepted = 0
-            t0 = time.perf_counter()
-            for body, media in batches:
-                r = c.post(
-                    f"/v1/spacecraft/{sc}/telemetry", content=body, headers={"content-type": media}
-                )
-                if r.status_code != 200:
-                    raise CliError(f"upload failed: {r.status_code} {r.text}")
-                accepted += r.json()["accepted"]
-                time.sleep(0.25)  # a downlink pass at a time; the scheduler works meanwhile
-            # one batch again: duplicates change nothing
-            dup = c.post(
-                f"/v1/spacecraft/{sc}/telemetry",
-                content=batches[0][0],
-                headers={"content-type": batches[0][1]},
-            ).json()
-            print(
-                f"  streamed {accepted} samples in {len(batches)} uploads "
-                f"({time.perf_counter() - t0:.1f} s); re-sent one upload: "
-                f"{dup['duplicates']} duplicates, {dup['accepted']} new"
-            )
-            # the last data: wait for the scheduler's final retraining (bounded)
-            deadline = time.monotonic() + 120
-            while time.monotonic() < deadline:
-                jobs = [v for v in c.get(f"/v1/spacecraft/{sc}/calibrations").json() if v["job_id"]]
-                spacecraft = c.get(f"/v1/spacecraft/{sc}").json()
-                text = c.get("/metrics").text
-                live = any(
-                    line.startswith(
-                        ('orbitcal_jobs{status="queued"}', 'orbitcal_jobs{status="running"}')
-                    )
-                    and not line.endswith(" 0.0")
-                    for line in text.splitlines()
-                )
-                if spacecraft["samples"] and not live and jobs:
-                    last = jobs[0]["provenance"]["data"]["end"]
-                    if last >= utc_s_to_iso([float(world.telemetry.t_utc_s[-1])])[0][:19]:
-                        break
-                    c.post(f"/v1/spacecraft/{sc}/calibrations")
-                time.sleep(0.5)
-            versions = c.get(f"/v1/spacecraft/{sc}/calibrations").json()
-            served = c.get(f"/v1/spacecraft/{sc}/calibration").json()
-    except BaseException:
-        server.should_exit = True
-        thread.join(timeout=30)
-        raise
+    bound = server.servers[0].sockets[0].getsockname()[1]
+    return RunningService(server, thread, f"http://127.0.0.1:{bound}")
 
-    # --- report ---------------------------------------------------------------------------------
-    tel = world.telemetry
+
+def _jobs_live(c: Any) -> bool:
+    """Whether a retraining is queued or running (the service's /metrics)."""
+    return any(
+        line.startswith(('orbitcal_jobs{status="queued"}', 'orbitcal_jobs{status="running"}'))
+        and not line.endswith(" 0.0")
+        for line in c.get("/metrics").text.splitlines()
+    )
+
+
+def _stream(c: Any, sc: str, demo: DemoWorld, tick_s: float) -> None:
+    """Register the spacecraft and upload the batches, one downlink pass at a time: after each
+    the scheduler gets a tick, and a retraining it started finishes before the next upload."""
+    from orbitcal.cli import CliError
+
+    r = c.post("/v1/spacecraft", json={"id": sc, "tle": demo.tle.text})
+    if r.status_code != 201:
+        raise CliError(f"registering the spacecraft failed: {r.text}")
+    accepted = 0
+    t0 = time.perf_counter()
+    for body, media in demo.batches:
+        r = c.post(f"/v1/spacecraft/{sc}/telemetry", content=body, headers={"content-type": media})
+        if r.status_code != 200:
+            raise CliError(f"upload failed: {r.status_code} {r.text}")
+        accepted += r.json()["accepted"]
+        time.sleep(tick_s + 0.1)
+        deadline = time.monotonic() + 120
+        while _jobs_live(c) and time.monotonic() < deadline:
+            time.sleep(0.1)
+    # one batch again: duplicates change nothing
+    body, media = demo.batches[0]
+    dup = c.post(
+        f"/v1/spacecraft/{sc}/telemetry", content=body, headers={"content-type": media}
+    ).json()
+    print(
+        f"  streamed {accepted} samples in {len(demo.batches)} uploads "
+        f"({time.perf_counter() - t0:.1f} s); re-sent one upload: "
+        f"{dup['duplicates']} duplicates, {dup['accepted']} new"
+    )
+
+
+def _wait_for_the_last_data(c: Any, sc: str, demo: DemoWorld) -> None:
+    """Until a calibration covers the last sample (bounded: 120 s)."""
+    from orbitcal.timescales import utc_s_to_iso
+
+    last_sample = utc_s_to_iso([float(demo.world.telemetry.t_utc_s[-1])])[0][:19]
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        jobs = [v for v in c.get(f"/v1/spacecraft/{sc}/calibrations").json() if v["job_id"]]
+        if jobs and not _jobs_live(c):
+            if jobs[0]["provenance"]["data"]["end"] >= last_sample:
+                return
+            c.post(f"/v1/spacecraft/{sc}/calibrations")
+        time.sleep(0.5)
+
+
+def _print_versions(
+    versions: list[dict[str, Any]], served: dict[str, Any], demo: DemoWorld
+) -> float:
+    """The version table, with each version's RMS against the simulation's truth over the last
+    6 h; returns that RMS for the version in service."""
+    from orbitcal.metrics import rms_nt
+    from orbitcal.pipeline import apply_document
+
+    tel = demo.world.telemetry
     last_hours = tel.t_utc_s >= tel.t_utc_s[-1] - 6 * 3600.0
-    truth = world.b_ref_body_nt[last_hours]
+    truth = demo.world.b_ref_body_nt[last_hours]
 
     def rms_on_recent(doc: dict[str, Any]) -> float:
         return rms_nt(apply_document(doc, tel.select(last_hours)), truth)
@@ -240,41 +272,88 @@ def run(args: argparse.Namespace) -> int:
             f"{v['holdout_rms_nt']:>9.2f} nT  {rms_on_recent(v['document']):>15.2f} nT  "
             f"{v['reason']}"
         )
+    print(TIMING_NOTE)
     final = rms_on_recent(served)
     print()
     print(
         f"  in service: version {served['version']} ({served['method']}); against the simulation's "
         f"truth over the last 6 h it leaves {final:.2f} nT rms (sensor noise "
-        f"{sensor.noise_std_nt:g} nT)"
+        f"{demo.sensor.noise_std_nt:g} nT)"
     )
     print()
+    return final
+
+
+def _print_where_to_look(url: str, admin_key: str, db: Path, sc: str) -> None:
+    """Links a browser opens as they are, and curl lines for the routes that need the key (a
+    browser cannot send the X-API-Key header)."""
+    print("Where to look (serving until Ctrl-C):")
+    print(f"  dashboard     {url}/dashboard#key={admin_key}")
+    print("                (the key is in the URL fragment: the browser keeps it, the server never")
+    print("                sees it in a URL)")
+    print(
+        f"  API docs      {url}/docs   (Authorize with the key below; OpenAPI {url}/openapi.json)"
+    )
+    print(f"  calibrations  curl -H 'X-API-Key: {admin_key}' {url}/v1/spacecraft/{sc}/calibrations")
+    print(f"  metrics       curl -H 'X-API-Key: {admin_key}' {url}/metrics")
+    print(f"  database      {db}")
+    print("Ctrl-C stops the service.")
+    sys.stdout.flush()
+
+
+def run(args: argparse.Namespace) -> int:
+    import httpx
+
+    from orbitcal.cli import CliError
+    from orbitcal.timescales import utc_s_to_iso
+
+    if args.days <= 0.25:
+        raise CliError("--days must be more than 0.25")
+    workdir = Path(args.dir) if args.dir else Path(tempfile.mkdtemp(prefix="orbitcal-demo-"))
+    workdir.mkdir(parents=True, exist_ok=True)
+    db = workdir / "orbitcal.sqlite"
+    admin_key = "ock_demo_" + secrets.token_urlsafe(24)
+    settings = _settings(args, db, admin_key)
+    demo = _simulate(args)
+    service = _start_service(settings, args.port)
+    # the URL only while it answers: without --keep-serving the service ends with the demo
+    where = service.url if args.keep_serving else "127.0.0.1 (stops when the demo ends)"
+    print(f"orbitcal demo: service on {where}; SQLite {db}")
+    print(
+        f"  spacecraft swarm-a on the real Swarm A TLE (NORAD {demo.tle.norad_id}, epoch "
+        f"{utc_s_to_iso([demo.tle.epoch_utc_s])[0][:19]}Z); {len(demo.world.telemetry.t_utc_s)} "
+        f"samples at 0.1 Hz over {args.days:g} days; sensor parameters change at "
+        f"{utc_s_to_iso([demo.t_change_utc_s])[0][:19]}Z"
+    )
+    sc = "swarm-a"
+    try:
+        with httpx.Client(base_url=service.url, headers={"X-API-Key": admin_key}, timeout=60) as c:
+            _stream(c, sc, demo, settings.scheduler_tick_s)
+            _wait_for_the_last_data(c, sc, demo)
+            versions = c.get(f"/v1/spacecraft/{sc}/calibrations").json()
+            served = c.get(f"/v1/spacecraft/{sc}/calibration").json()
+    except BaseException:
+        service.stop()
+        raise
+    final = _print_versions(versions, served, demo)
+    code = 0 if final < 10.0 else 1
     if not args.keep_serving:
-        # The links would point at a service that is gone: say so instead.
-        server.should_exit = True
-        thread.join(timeout=30)
+        service.stop()
         print(
             f"The demo service has stopped; its database is kept in {db}. Run "
             "`orbitcal demo --keep-serving` to keep the service running and open its dashboard."
         )
         sys.stdout.flush()
-        return 0 if final < 10.0 else 1
+        return code
     try:  # Ctrl-C from the first link on stops the service cleanly
-        print("Where to look (serving until Ctrl-C):")
-        print(f"  dashboard   {url}/dashboard#key={admin_key}")
-        print(f"  API docs    {url}/docs   (OpenAPI {url}/openapi.json)")
-        print(f"  metrics     {url}/metrics (X-API-Key: {admin_key})")
-        print(f"  database    {db}")
-        print(f"  telemetry   {url}/v1/spacecraft/{sc}/calibrations")
-        sys.stdout.flush()
-        while thread.is_alive():
+        _print_where_to_look(service.url, admin_key, db, sc)
+        while service.thread.is_alive():
             time.sleep(0.5)
     except KeyboardInterrupt:
         pass
-    server.should_exit = True
-    thread.join(timeout=30)
-    if thread.is_alive():
-        print("orbitcal demo: the service did not stop within 30 s", file=sys.stderr)
-    else:
+    if service.stop():
         print("orbitcal demo: the service has stopped.")
+    else:
+        print("orbitcal demo: the service did not stop within 30 s", file=sys.stderr)
     sys.stdout.flush()
-    return 0 if final < 10.0 else 1
+    return code

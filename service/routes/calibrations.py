@@ -340,34 +340,36 @@ def residuals(
     (``residual_xyz_nt``) and ``|b_cal - b_ref|`` (``residual_nt``) [nT] vs time.
 
     ``rms_nt`` (per component) and ``norm_rms_nt`` (of the vector magnitude) follow
-    ``orbitcal.metrics`` over the points returned.
+    ``orbitcal.metrics`` over **every** sample of the window (``n_samples``), so they do not depend
+    on ``max_points``, which thins only the series returned for the plot.
     """
     sc, tel, doc = _recent_telemetry(engine, spacecraft_id, settings)
     if doc is None:
         raise HTTPException(status_code=404, detail="no calibration in service")
-    n = tel.t_utc_s.shape[0]
-    idx = np.unique(np.linspace(0, n - 1, min(n, max_points)).astype(int))
-    part = tel.select(idx)
-    if part.q_wxyz is None:
+    if tel.q_wxyz is None:
         raise BadInputError(
             "residuals need attitude quaternions (q_w, q_x, q_y, q_z) on the samples of the window",
             field="q_w",
         )
     truth, _ = pipeline.fit_data_for_telemetry(
-        part,
+        tel,
         orbit=pipeline.orbit_from(sc.tle, sc.omm),
         attitude_frame=sc.attitude_frame,
         field=str(doc.get("reference_field", settings.reference_field)),
     )
     _b_cal, res, _scalar = pipeline.residuals(doc, truth)
     assert res is not None
+    n = tel.t_utc_s.shape[0]
+    idx = np.unique(np.linspace(0, n - 1, min(n, max_points)).astype(int))
+    shown = res[idx]
     return {
         "spacecraft": sc.id,
         "version": doc.get("version"),
         "method": doc.get("method"),
-        "t_utc_s": part.t_utc_s.tolist(),
-        "residual_nt": np.linalg.norm(res, axis=1).tolist(),
-        "residual_xyz_nt": res.tolist(),
+        "n_samples": int(n),
+        "t_utc_s": tel.t_utc_s[idx].tolist(),
+        "residual_nt": np.linalg.norm(shown, axis=1).tolist(),
+        "residual_xyz_nt": shown.tolist(),
         "rms_nt": rms_nt(res),
         "norm_rms_nt": norm_rms_nt(res),
     }

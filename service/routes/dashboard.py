@@ -71,9 +71,19 @@ def dashboard() -> HTMLResponse:
     return HTMLResponse(page, headers=_PAGE_HEADERS)
 
 
+#: ReDoc's sidebar shows the Redocly logo from a CDN (``<img src="https://cdn.redoc.ly/…">``):
+#: the served bundle names a blank inline image instead, so the page asks no other host for
+#: anything (the CSP below would refuse it, but the browser would still try and log it).
+REDOC_LOGO_URL = "https://cdn.redoc.ly/redoc/logo-mini.svg"
+_BLANK_SVG = "data:image/svg+xml,%3Csvg xmlns='http://www.w3.org/2000/svg' width='1' height='1'/%3E"
+
+
 @cache
 def _asset(name: str) -> bytes:
-    return resources.files("fastapi_offline").joinpath("static", name).read_bytes()
+    data = resources.files("fastapi_offline").joinpath("static", name).read_bytes()
+    if name == "redoc.standalone.js":
+        data = data.replace(REDOC_LOGO_URL.encode(), _BLANK_SVG.encode())
+    return data
 
 
 @router.get(_ASSETS_PATH + "/{name}", include_in_schema=False)
@@ -86,6 +96,12 @@ def docs_asset(name: str) -> Response:
         media_type=DOCS_ASSETS[name],
         headers={"Cache-Control": "public, max-age=86400"},
     )
+
+
+@router.get("/favicon.ico", include_in_schema=False)
+def favicon() -> Response:
+    """The icon browsers ask for on every page (the dashboard links it too): no 404 in the logs."""
+    return docs_asset("favicon.png")
 
 
 def _prefix(request: Request) -> str:
@@ -222,6 +238,30 @@ async def activity(
     return await run_in_threadpool(_activity, engine, spacecraft_id, max_jobs)
 
 
+@router.get("/v1/spacecraft/{spacecraft_id}/diagnosis/latest", responses=_ERRORS)
+def latest_diagnosis(
+    spacecraft_id: str,
+    request: Request,
+    engine: EngineDep,
+    _who: Annotated[Principal, require_scope("read")],
+    prior: bool = False,
+) -> dict[str, Any]:
+    """The latest diagnosis report computed so far, or none yet (200 either way: "nothing yet"
+    is the dashboard's normal empty state, not an error; 404 only for an unknown spacecraft).
+
+    ``state`` is ``ready`` (``report`` holds it), ``computing`` (one is being computed) or
+    ``none`` (none asked for: ``GET .../diagnosis`` computes one).
+    """
+    with read_tx(engine) as conn:
+        get_spacecraft(conn, spacecraft_id)
+    key = (spacecraft_id, prior)
+    hit = request.app.state.diagnosis_cache.get(key)
+    if hit is not None:
+        return {"state": "ready", "report": hit[1]}
+    running = request.app.state.diagnosis_running.get(key)
+    return {"state": "computing" if running and not running.done() else "none", "report": None}
+
+
 @router.get("/v1/spacecraft/{spacecraft_id}/diagnosis/report.html", responses={**_ERRORS, **_HTML})
 def diagnosis_report_html(
     spacecraft_id: str,
@@ -231,7 +271,7 @@ def diagnosis_report_html(
     prior: bool = False,
 ) -> HTMLResponse:
     """The latest diagnosis report computed so far as an HTML page (404 if none yet)."""
-    from orbitcal.diagnose.report import report_html
+    from orbitcal.diagnose.html_report import report_html
 
     with read_tx(engine) as conn:
         get_spacecraft(conn, spacecraft_id)

@@ -85,6 +85,9 @@ class Browser:
         self.blocked_urls: list[str] = []  # refused by the browser itself (e.g. the page's CSP)
         self._request_urls: dict[str, str] = {}
         self.console_errors: list[str] = []
+        #: "STATUS URL" of every answer >= 400 (a 404 for a favicon is logged by the browser
+        #: as a console error outside the page's scripts, so console_errors would miss it)
+        self.error_responses: list[str] = []
         targets = self.call("Target.getTargets")["targetInfos"]
         page = next(t for t in targets if t["type"] == "page")
         self.session = self.call("Target.attachToTarget", targetId=page["targetId"], flatten=True)[
@@ -120,6 +123,10 @@ class Browser:
         if method == "Network.requestWillBeSent":
             self.requested_urls.append(params["request"]["url"])
             self._request_urls[params["requestId"]] = params["request"]["url"]
+        elif method == "Network.responseReceived" and params["response"]["status"] >= 400:
+            self.error_responses.append(
+                f"{params['response']['status']} {params['response']['url']}"
+            )
         elif method == "Network.loadingFailed" and params.get("blockedReason"):
             self.blocked_urls.append(self._request_urls.get(params["requestId"], "?"))
         elif method == "Runtime.exceptionThrown":

@@ -148,6 +148,38 @@ def test_residuals_apply_the_full_network_calibration(fleet: Fleet, tmp_path: Pa
     assert res["rms_nt"] < 3.0 and linear_rms > 5 * res["rms_nt"], (res["rms_nt"], linear_rms)
 
 
+def test_residual_rms_does_not_depend_on_the_plot_decimation(fleet: Fleet, tmp_path: Path) -> None:
+    """One number per quantity: the RMS is over every sample of the window, whatever number of
+    points the plot asks for (it was 1.95249 nT at 1,000 points, 1.95183 at 1,500 and 1.95659 at
+    all of them), and equals `orbitcal apply` minus `orbitcal truth` on the stored table."""
+    from orbitcal.cli import main as cli
+
+    with fleet.server.client() as c:
+        answers = {
+            m: c.get(f"/v1/spacecraft/swarm-a/residuals?max_points={m}").json()
+            for m in (10, 1000, 1500, 20000)
+        }
+        doc = c.get("/v1/spacecraft/swarm-a/calibration").json()
+    for m, res in answers.items():
+        assert len(res["t_utc_s"]) == min(m, N_SAMPLES)
+        assert res["n_samples"] == N_SAMPLES
+    rms = {m: res["rms_nt"] for m, res in answers.items()}
+    norm = {m: res["norm_rms_nt"] for m, res in answers.items()}
+    assert len(set(rms.values())) == 1, rms
+    assert len(set(norm.values())) == 1, norm
+    # the same figure through the command line: apply the document, subtract the CLI's truth
+    cal_path, table_path = tmp_path / "cal.json", tmp_path / "t.csv"
+    tle_path, out_path, truth_path = tmp_path / "sc.tle", tmp_path / "o.csv", tmp_path / "truth.csv"
+    cal_path.write_text(__import__("json").dumps(doc))
+    tle_path.write_text(SWARM_A_TLE)
+    fleet.df.to_csv(table_path, index=False)
+    assert cli(["apply", str(cal_path), str(table_path), "--out", str(out_path)]) == 0
+    assert cli(["truth", str(table_path), "--tle", str(tle_path), "--out", str(truth_path)]) == 0
+    applied, truth = pd.read_csv(out_path), pd.read_csv(truth_path)
+    diff = applied[["b_x", "b_y", "b_z"]].to_numpy() - truth[["b_x", "b_y", "b_z"]].to_numpy()
+    assert rms[1000] == pytest.approx(rms_nt(diff), rel=1e-6)
+
+
 def test_activity_counts_samples_per_day_rejections_and_retrainings(fleet: Fleet) -> None:
     with fleet.server.client() as c:
         a = c.get("/v1/spacecraft/swarm-a/activity").json()
@@ -253,7 +285,41 @@ def test_diagnosis_report_html(fleet: Fleet) -> None:
         finally:
             _set_report(fleet.server, None)
     assert r.status_code == 200 and r.headers["content-type"].startswith("text/html")
-    assert "Verdict: <b>time_offset</b>" in r.text and "7.69" in r.text
+    assert 'data-verdict="time_offset"' in r.text and "7.69" in r.text
+    # the same page as the command line's for the same JSON (one renderer, JSON only)
+    from orbitcal.diagnose.html_report import report_html
+
+    assert r.text == report_html(_report(), title="orbitcal diagnosis of swarm-a")
+
+
+def test_latest_diagnosis_is_an_empty_state_not_a_404(fleet: Fleet) -> None:
+    _set_report(fleet.server, None)
+    with fleet.server.client() as c:
+        assert c.get("/v1/spacecraft/swarm-a/diagnosis/latest").json() == {
+            "state": "none",
+            "report": None,
+        }
+        assert c.get("/v1/spacecraft/nosuch/diagnosis/latest").status_code == 404
+        _set_report(fleet.server, _report())
+        try:
+            latest = c.get("/v1/spacecraft/swarm-a/diagnosis/latest").json()
+        finally:
+            _set_report(fleet.server, None)
+    assert latest == {"state": "ready", "report": _report()}
+
+
+def test_a_none_verdict_page_never_says_none_none(fleet: Fleet) -> None:
+    report = _report()
+    report.update(verdict="none", verdict_status="none", verdict_confidence=1.0)
+    report["effects"][0]["significant"] = False
+    _set_report(fleet.server, report)
+    try:
+        with fleet.server.client() as c:
+            page = c.get("/v1/spacecraft/swarm-a/diagnosis/report.html").text
+    finally:
+        _set_report(fleet.server, None)
+    assert "No unmodelled effect found" in page
+    assert "none (none" not in page and "confidence 100" not in page
 
 
 # --- in chromium -----------------------------------------------------------------------------
@@ -437,16 +503,19 @@ def test_dashboard_in_chromium(fleet: Fleet, tmp_path: Path) -> None:
         opened = browser.wait_for("window.openedUrl")
         assert opened.startswith("blob:")
         report_page = browser.evaluate(f"fetch('{opened}').then(r => r.text())")
-        assert "Verdict: <b>time_offset</b>" in report_page
+        assert 'data-verdict="time_offset"' in report_page
         shot = browser.screenshot(tmp_path / "dashboard-network-calibration.png")
         external = browser.external_requests(server.url)
         errors = list(browser.console_errors)
+        failed = list(browser.error_responses)
     _set_report(server, None)
     keep_screenshot(shot)
     keep_screenshot(tmp_path / "dashboard-no-diagnosis.png")
     keep_screenshot(tmp_path / "dashboard-empty-spacecraft.png")
     assert external == [], external
     assert errors == [], errors
+    # no favicon 404 on any load, no 404 for "no diagnosis yet" (an empty state, not an error)
+    assert [u for u in failed if "favicon" in u or "/diagnosis" in u] == [], failed
 
 
 @pytest.mark.browser
@@ -474,7 +543,9 @@ def test_dashboard_with_authentication_off(tmp_path: Path) -> None:
             )
             shot = browser.screenshot(tmp_path / "dashboard-auth-off.png")
             external = browser.external_requests(server.url)
+            failed = list(browser.error_responses)
     keep_screenshot(shot)
+    assert [u for u in failed if "favicon" in u or "/diagnosis" in u] == [], failed
     assert state == {
         "banner": True,
         "notice": True,
