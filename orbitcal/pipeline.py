@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -35,6 +35,9 @@ from orbitcal.calibrate.holdout import later_block_split
 from orbitcal.errors import BadInputError, NotEnoughDataError
 from orbitcal.metrics import norm_rms_nt, primary_key, rms_nt, scalar_rms_nt
 from orbitcal.telemetry import Telemetry
+
+if TYPE_CHECKING:  # pragma: no cover
+    from orbitcal.diagnose.result import Report
 
 __all__ = [
     "EXCLUSION_REASONS",
@@ -1009,24 +1012,18 @@ def diagnose(
     field: str = "IGRF-14",
     prior_document: dict[str, Any] | None = None,
     rng: np.random.Generator | None = None,
-) -> dict[str, Any]:
+) -> Report:
     """The section-5 diagnosis report of ``telemetry`` (:func:`orbitcal.diagnose.diagnose`).
 
     ``prior_document``: a calibration document (e.g. the one in service) whose linear part is a
-    prior on the 12 parameters (:mod:`orbitcal.diagnose.prior`).
+    prior on the 12 parameters (:mod:`orbitcal.diagnose.prior`); the report names its version.
     """
-    from orbitcal.diagnose import diagnose as run
+    from orbitcal.diagnose.api import diagnose as run
+    from orbitcal.diagnose.options import DiagnosisOptions
     from orbitcal.diagnose.prior import prior_from_document
 
-    return dict(
-        run(
-            telemetry,
-            orbit=orbit,
-            field=field,
-            attitude_frame=attitude_frame,
-            rng=rng if rng is not None else np.random.default_rng(0),
-            calibration_prior=(
-                prior_from_document(prior_document) if prior_document is not None else None
-            ),
-        )
+    prior = (
+        None if prior_document is None else prior_from_document(prior_document, names_version=True)
     )
+    options = DiagnosisOptions(field=field, attitude_frame=attitude_frame)
+    return run(telemetry, orbit=orbit, options=options, prior=prior, rng=rng).report

@@ -9,10 +9,8 @@ import fcntl
 import hashlib
 import logging
 import tempfile
-import threading
 import time
 from collections.abc import AsyncIterator, Callable
-from concurrent.futures import ThreadPoolExecutor
 from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import IO, Any
@@ -26,6 +24,7 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 import orbitcal
 from orbitcal.errors import OrbitcalError
 from service.auth import is_loopback
+from service.diagnosis_cache import DiagnosisCache
 from service.jobs import FitFunction, InlineRunner, JobRunner, recover_interrupted
 from service.logs import configure_logging, redact_url
 from service.metrics import Metrics
@@ -226,11 +225,11 @@ def create_app(
                 "auth": settings.auth,
             },
         )
-        app.state.diagnosis_pool = ThreadPoolExecutor(1, thread_name_prefix="orbitcal-diagnosis")
+        app.state.diagnoses.start()
         try:
             yield
         finally:
-            app.state.diagnosis_pool.shutdown(wait=False, cancel_futures=True)
+            app.state.diagnoses.shutdown()
             scheduler.shutdown()
             job_runner.shutdown()
             engine.dispose()
@@ -269,9 +268,7 @@ def create_app(
     app.state.admin_key_hash = (
         hash_key(settings.admin_key.get_secret_value()) if settings.admin_key else None
     )
-    app.state.diagnosis_cache = {}
-    app.state.diagnosis_running = {}
-    app.state.diagnosis_lock = threading.Lock()
+    app.state.diagnoses = DiagnosisCache()
     app.state.key_cache = {}
     app.state.key_lock = asyncio.Lock()
     app.state.calibration_cache = {}

@@ -235,11 +235,11 @@ def diagnosis_report_html(
 
     with read_tx(engine) as conn:
         get_spacecraft(conn, spacecraft_id)
-    hit = request.app.state.diagnosis_cache.get((spacecraft_id, prior))
+    hit = request.app.state.diagnoses.latest((spacecraft_id, prior))
     if hit is None:
         raise HTTPException(
             status_code=404,
             detail=f"no diagnosis of {spacecraft_id!r} yet; GET .../diagnosis computes one",
         )
-    page = report_html(hit[1], title=f"orbitcal diagnosis of {spacecraft_id}")
+    page = report_html(hit[1].to_json(), title=f"orbitcal diagnosis of {spacecraft_id}")
     return HTMLResponse(page, headers={"Cache-Control": "no-store"})
