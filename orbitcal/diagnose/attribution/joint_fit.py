@@ -227,12 +227,22 @@ def fit_joint(
             if np.all(np.abs(theta - theta_prev) <= tol_sd * np.maximum(sd, 1e-300)):
                 break
         theta_prev = theta
-        if it < huber_steps:
-            u = np.abs(r) / (2.5 * sigma)  # Huber, k = 2.5 sigma
-            w = np.where(u <= 1.0, 1.0, 1.0 / np.maximum(u, 1e-12))
-        else:
-            u = np.abs(r) / (4.685 * sigma)  # Tukey bisquare, c = 4.685 sigma
-            w = np.where(u < 1.0, (1.0 - u**2) ** 2, 0.0)
+        w = _robust_weights(r, sigma, huber=it < huber_steps)
+    return _packed(blocks, scale, theta, normal, sigma, r, bounded=bounded)
+
+
+def _packed(
+    blocks: Sequence[DesignBlock],
+    scale: FloatArray,
+    theta: FloatArray,
+    normal: FloatArray,
+    sigma: float,
+    r: FloatArray,
+    *,
+    bounded: bool,
+) -> JointFit:
+    """The :class:`JointFit` of the scaled solution ``theta`` of the normal matrix ``normal``:
+    the parameters in physical units and their covariance (white noise of ``sigma``)."""
     # Covariance of the calibration parameters (white-noise assumption; the split tests inflate it).
     try:
         cov_scaled = np.linalg.inv(normal) * sigma**2
@@ -263,6 +273,15 @@ def fit_joint(
         bounded=bounded,
         train_rss_nt2=float(r @ r),
     )
+
+
+def _robust_weights(r: FloatArray, sigma: float, *, huber: bool) -> FloatArray:
+    """Reweighting step: Huber (k = 2.5 sigma) or Tukey's bisquare (c = 4.685 sigma)."""
+    if huber:
+        u = np.abs(r) / (2.5 * sigma)  # Huber, k = 2.5 sigma
+        return np.asarray(np.where(u <= 1.0, 1.0, 1.0 / np.maximum(u, 1e-12)))
+    u = np.abs(r) / (4.685 * sigma)  # Tukey bisquare, c = 4.685 sigma
+    return np.asarray(np.where(u < 1.0, (1.0 - u**2) ** 2, 0.0))
 
 
 def _robust_sigma(r: FloatArray) -> float:
