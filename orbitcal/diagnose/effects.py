@@ -21,9 +21,10 @@ one the simulator uses.
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 
@@ -45,9 +46,6 @@ from orbitcal.diagnose.design import (
     _design_temperature,
     _design_time_offset,
 )
-
-if TYPE_CHECKING:  # pragma: no cover
-    from orbitcal.diagnose.attribution.scores import EffectScore
 
 __all__ = [
     "CATALOGUE",
@@ -133,9 +131,11 @@ class RegionalTest:
 
     Attributes
     ----------
-    test : callable
-        ``test(data, residual_nt, selected) -> EffectScore | None``: the effect judged on the
-        residual of the selected model (None when it cannot be judged or is selected already).
+    test : str
+        ``"module:function"`` of ``test(data, residual_nt, selected) -> EffectScore | None``:
+        the effect judged on the residual of the selected model (None when it cannot be judged
+        or is selected already). Named, not imported: the test lives with the engine
+        (:mod:`orbitcal.diagnose.attribution.regional`), which imports this catalogue.
     quiet_mask : callable
         ``quiet_mask(data) -> ndarray of bool``: the samples where the effect does not act. When
         the test finds it in the calibration's residual, the other effects are fitted and judged
@@ -144,17 +144,14 @@ class RegionalTest:
         What the report says about that restriction.
     """
 
-    test: Callable[[DiagnosisData, FloatArray, Sequence[str]], EffectScore | None]
+    test: str
     quiet_mask: Callable[[DiagnosisData], BoolArray]
     quiet_note: str
 
-
-def _fac_regional_test(
-    data: DiagnosisData, residual_nt: FloatArray, selected: Sequence[str]
-) -> EffectScore | None:
-    from orbitcal.diagnose.attribution.regional import regional_fac
-
-    return regional_fac(data, residual_nt, selected)
+    def run(self, data: DiagnosisData, residual_nt: FloatArray, selected: Sequence[str]) -> Any:
+        """The test on ``residual_nt`` (an ``EffectScore``, or None)."""
+        module, _, name = self.test.partition(":")
+        return getattr(importlib.import_module(module), name)(data, residual_nt, selected)
 
 
 def _fac_quiet(data: DiagnosisData) -> BoolArray:
@@ -163,7 +160,7 @@ def _fac_quiet(data: DiagnosisData) -> BoolArray:
 
 #: The field-aligned currents' regional test (:mod:`orbitcal.diagnose.attribution.regional`).
 FAC_REGIONAL_TEST = RegionalTest(
-    test=_fac_regional_test,
+    test="orbitcal.diagnose.attribution.regional:regional_fac",
     quiet_mask=_fac_quiet,
     quiet_note=(
         f"|magnetic latitude| < {QUIET_MLAT_DEG:.0f} deg: the currents found in the "

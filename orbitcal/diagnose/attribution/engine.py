@@ -117,7 +117,7 @@ def _split_for(
     for eff in candidates:
         if eff.regional_test is None:
             continue
-        pre = eff.regional_test.test(data, base.residual_nt, [])
+        pre = eff.regional_test.run(data, base.residual_nt, [])
         quiet = eff.regional_test.quiet_mask(data)
         if (
             pre is not None
@@ -354,7 +354,7 @@ def attribute(
     for eff in candidates:
         if eff.regional_test is None:
             continue
-        regional = eff.regional_test.test(data, final.residual_nt, selected)
+        regional = eff.regional_test.run(data, final.residual_nt, selected)
         if regional is not None and split.regional is eff:
             regional.params["others_judged_on"] = eff.regional_test.quiet_note
         if regional is not None and regional.significant:
