@@ -272,7 +272,10 @@ def test_public_diagnose_on_telemetry(real_tles_text: str) -> None:
         attitude=NadirLVLH(),
         effects=[make_effect("nonlinearity")],
     )
-    report = diagnose(world.telemetry, orbit=Orbit.from_tle(tle.text), rng=np.random.default_rng(0))
+    diagnosis = diagnose(
+        world.telemetry, orbit=Orbit.from_tle(tle.text), rng=np.random.default_rng(0)
+    )
+    report = diagnosis.report.to_json()
     assert report["verdict"] == "nonlinearity"
     assert report["baseline"]["method"] == "linear-12"
     assert report["effects"][0]["holdout_rms_after_nt"] < report["baseline"]["holdout_rms_nt"]

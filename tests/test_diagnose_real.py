@@ -287,9 +287,9 @@ def test_real_orbit_error_from_an_older_tle(attitude: str) -> None:
     )
     truth_km = world.truth["effects"][0]["info"]["along_track_km_mean"]
     assert abs(truth_km) > 1.0  # a week-old element set is km off along track
-    data = diagnosis_data(
-        world.telemetry, orbit=Orbit.from_tle(old.text), options=DiagnosisOptions(crust_model=None)
-    )  # type: ignore[attr-defined]
+    options = DiagnosisOptions(crust_model=None)
+    orbit = Orbit.from_tle(old.text)  # type: ignore[attr-defined]
+    data = diagnosis_data(world.telemetry, orbit=orbit, options=options)
     report, att = _diagnose_parts(data, learned=False)
     assert report["verdict"] == "orbit_error"
     assert report["final"]["effects"] == ["orbit_error"]
