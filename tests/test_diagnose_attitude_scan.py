@@ -75,7 +75,7 @@ def test_beam_search_finds_the_periods_a_greedy_scan_locks_out(
     """Beside the time offset and the ring current, the greedy scan (a beam of one) takes a first
     period from the mixture of the three sinusoids and ends at 6,576 / 4,238 / 9,189 s, twice the
     training residual of the injected periods; a beam of three sets finds them."""
-    import orbitcal.diagnose.effects as effects
+    import orbitcal.diagnose.attitude_scan as attitude_scan
 
     data, train = attitude_time_offset_external
     fixed = [
@@ -83,7 +83,7 @@ def test_beam_search_finds_the_periods_a_greedy_scan_locks_out(
         for b in (get_effect(n).design(data, train) for n in ("time_offset", "external_field"))
         if b is not None
     ]
-    monkeypatch.setattr(effects, "ATTITUDE_BEAM", beam)
+    monkeypatch.setattr(attitude_scan, "ATTITUDE_BEAM", beam)
     block = design_attitude(data, train, fixed=fixed)
     assert block is not None
     found = _periods(block)
