@@ -6,20 +6,20 @@ For each of four parameters -- the time offset ``dt_s``, the temperature offset 
 ``offset_*_nt_per_degc``, the magnetorquer couplings ``coupling_*_nt_per_am2`` and the crustal
 amplitude ``crust_scale`` -- worlds of :func:`orbitcal.simulate.simulate_world` on real Swarm/ISS
 TLEs (4 orbits at 10 s, nadir and tumbling alternately, a random sensor) carry that one effect at a
-random size; the diagnosis runs blind (:func:`orbitcal.diagnose.attribute`) and its reported 90 %
+random size; the diagnosis runs blind (:func:`orbitcal.diagnose.diagnose_data`) and its 90 %
 interval for the effect (``EffectScore.intervals``) is compared with the injected value, expressed
 in the diagnosis' parameterisation: an effect injected before the sensor matrix ``A`` appears in
-sensor axes as ``A @ value`` (temperature offsets, couplings); the time offset's correction is
-minus the lateness of the tags and the crust is injected as the LCS-1 model the diagnosis is
-given, times the amplitude -- both seen through ``A``, so their truth is the injected sensor-unit
-field projected on the model's column (calibration columns projected out), a few per cent from
-the nominal value (``nominal`` in the JSON). Coverage = fraction of intervals holding the
-truth (target 85-95 %).
+sensor axes as ``A @ value`` (temperature offsets, couplings); the time offset's correction is minus
+the lateness of the tags and the crust is injected as the LCS-1 model the diagnosis is given, times
+the amplitude -- both seen through ``A``, so their truth is the injected sensor-unit field projected
+on the model's column (calibration columns projected out), a few per cent from the nominal value
+(``nominal`` in the JSON). Coverage = fraction of intervals holding the truth (target 85-95 %).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import platform
 import time
@@ -30,8 +30,8 @@ import numpy as np
 
 def _world(kind: str, i: int, rng: np.random.Generator, tle_text: str) -> dict[str, Any]:
     from orbitcal.blas import one_blas_thread
-    from orbitcal.diagnose import attribute
-    from orbitcal.diagnose.api import diagnosis_data
+    from orbitcal.diagnose.api import diagnose_data, diagnosis_data
+    from orbitcal.diagnose.bench import BENCH_OPTIONS
     from orbitcal.orbit import Orbit
     from orbitcal.simulate import (
         NadirLVLH,
@@ -74,12 +74,11 @@ def _world(kind: str, i: int, rng: np.random.Generator, tle_text: str) -> dict[s
             attitude=attitude,
             effects=[effect],
         )
-        data = diagnosis_data(
-            world.telemetry,
-            orbit=Orbit.from_tle(tle.text),
-            crust_model="LCS-1" if kind == "crust_scale" else None,
+        options = dataclasses.replace(
+            BENCH_OPTIONS, crust_model="LCS-1" if kind == "crust_scale" else None
         )
-        att = attribute(data, split_tests=False)
+        data = diagnosis_data(world.telemetry, orbit=Orbit.from_tle(tle.text), options=options)
+        att = diagnose_data(data, options=options).attribution
     a = np.asarray(world.sensor.a_matrix)
     name = {
         "dt_s": "time_offset",
@@ -92,7 +91,7 @@ def _world(kind: str, i: int, rng: np.random.Generator, tle_text: str) -> dict[s
         # The injected field in sensor units (through A), projected on the model's column with
         # the 12 calibration columns projected out on the training samples: the value the
         # diagnosis' parameterisation gives that field (A scales it by a few per cent).
-        from orbitcal.diagnose.attribution import _calibration_basis
+        from orbitcal.diagnose.attribution.uncertainty import _calibration_basis
 
         f = (sum(world.injected_body_nt.values()) @ a.T)[att.train]
         col = data.db_ref_body_dt_nt_s if kind == "dt_s" else data.b_crust_body_nt

@@ -2,7 +2,7 @@
 processes on the same telemetry, in turn (diagnose, linear, diagnose, ...), and a week at 1 Hz.
 
 Run:  python benchmarks/diagnose_timing.py DAY_DIR [--week WEEK_DIR] [--build] [--repeats 2]
-      [--out PATH]
+      [--against SRC] [--out PATH]
 
 ``DAY_DIR`` (and ``WEEK_DIR``) hold telemetry.csv and spacecraft.tle from ``orbitcal simulate``;
 with ``--build`` a missing one is simulated first: one day (or seven) at 1 Hz from 2022-08-02 on
@@ -10,6 +10,10 @@ the shipped real Swarm A TLE (NORAD 39452), nadir, with the temperature effect -
 /tmp and reuse. Reported per pair: wall and CPU seconds of each process and the peak resident
 memory of the diagnosis (``ru_maxrss`` of the child), with the load average; for the week, its
 wall and CPU time against seven times the median one-day diagnosis of the same run.
+With ``--against SRC`` (a directory holding another revision's ``orbitcal/``, e.g. from
+``git archive REV orbitcal | tar -x -C SRC``) each pair also runs that revision's diagnosis on the
+same telemetry, in turn with this one's, and the table gives this / that (issue 23: the same day
+before and after a refactoring, in one session).
 Issue 15 asks for diagnose <= 4x the linear calibration and <= 600 MB at 86,400 samples, and a
 week that completes within 2 GB and 1.3 x 7 x the one-day time.
 """
@@ -30,11 +34,15 @@ RESULTS = Path(__file__).resolve().parent / "results" / "diagnose_timing.md"
 TLE = Path(__file__).resolve().parents[1] / "orbitcal" / "data" / "swarm_iss_real_tles.tle"
 
 
-def _run(cmd: list[str]) -> tuple[float, float, float]:
-    """Wall [s], CPU [s] and peak RSS [MB] of one whole child process."""
+def _run(cmd: list[str], src: Path | None = None) -> tuple[float, float, float]:
+    """Wall [s], CPU [s] and peak RSS [MB] of one whole child process (``src``: the source tree
+    it imports orbitcal from, first on its path)."""
+    env = None if src is None else {**os.environ, "PYTHONPATH": str(src)}
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, cwd=src
+    )
     _, status, usage = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - t0
     if status != 0:
@@ -63,11 +71,15 @@ def main() -> None:
     ap.add_argument("--week", type=Path, default=None)
     ap.add_argument("--build", action="store_true")
     ap.add_argument("--repeats", type=int, default=2)
+    ap.add_argument("--against", type=Path, default=None, metavar="SRC")
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args()
     for world, days in ((args.world, 1), (args.week, 7)):
         if world is not None and args.build and not (world / "telemetry.csv").exists():
             _build(world, days)
+    if args.against is not None:
+        _against(args)
+        return
     base = [sys.executable, "-m", "orbitcal"]
 
     def diag(world: Path) -> list[str]:
@@ -120,6 +132,43 @@ def main() -> None:
             "",
         ]
     text = "\n".join(lines)
+    args.out.write_text(text)
+    print(text)
+
+
+def _against(args: argparse.Namespace) -> None:
+    """This revision's diagnosis against the one in ``args.against``, in turn on the same day."""
+    tel, tle = str(args.world / "telemetry.csv"), str(args.world / "spacecraft.tle")
+    here = Path(__file__).resolve().parents[1]
+    cmd = [sys.executable, "-m", "orbitcal", "diagnose", tel, "--tle", tle, "--out", os.devnull]
+    load0 = _load()
+    rows = []
+    for _ in range(args.repeats):
+        other, this = _run(cmd, args.against.resolve()), _run(cmd, here)
+        rows.append((this, other))
+        print(this, other, flush=True)
+    n = Path(tel).read_text().count("\n") - 1
+    lines = [
+        f"World `{args.world.name}`: {n:,} samples. Whole `orbitcal diagnose` processes in turn "
+        f"(that revision, then this one), {args.repeats} pairs. Load average {load0} at start, "
+        f"{_load()} at end; nproc {os.cpu_count()}. That revision: `{args.against}`.",
+        "",
+        "| pair | this wall / cpu [s] | that wall / cpu [s] | this / that wall | cpu "
+        "| peak RSS this / that [MB] |",
+        "|---:|---:|---:|---:|---:|---:|",
+    ]
+    for i, (d, a) in enumerate(rows):
+        lines.append(
+            f"| {i + 1} | {d[0]:.1f} / {d[1]:.1f} | {a[0]:.1f} / {a[1]:.1f} | {d[0] / a[0]:.3f} "
+            f"| {d[1] / a[1]:.3f} | {d[2]:.0f} / {a[2]:.0f} |"
+        )
+    wall = [d[0] / a[0] for d, a in rows]
+    cpu = [d[1] / a[1] for d, a in rows]
+    lines += [
+        "",
+        f"Median ratio this / that: wall {np.median(wall):.3f}, cpu {np.median(cpu):.3f}.",
+    ]
+    text = "\n".join(lines) + "\n"
     args.out.write_text(text)
     print(text)
 

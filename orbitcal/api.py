@@ -273,6 +273,10 @@ def diagnose_table(
 ) -> dict[str, Any]:
     """Which unmodelled effect explains the calibrated residual (CONTRACT section-5 report).
 
+    A thin wrapper of :func:`orbitcal.diagnose.diagnose` for notebooks: the report as a dict.
+    The whole :class:`~orbitcal.diagnose.Diagnosis` (with the attribution and the arrays) and
+    every option (:class:`~orbitcal.diagnose.DiagnosisOptions`) are there.
+
     Parameters
     ----------
     telemetry : Telemetry
@@ -289,22 +293,9 @@ def diagnose_table(
     dict
         ``verdict``, ranked ``effects`` with their held-out shrink, ``baseline`` and ``final``.
     """
-    import numpy as np
-
-    from orbitcal.blas import one_blas_thread
     from orbitcal.diagnose.api import diagnose
+    from orbitcal.diagnose.options import DiagnosisOptions
 
-    prior = None
-    if calibration is not None:
-        from orbitcal.diagnose.prior import prior_from_document
-
-        prior = prior_from_document(dict(calibration))
-    with one_blas_thread():
-        return diagnose(
-            telemetry,
-            orbit=orbit,
-            field=field,
-            attitude_frame=attitude_frame,
-            rng=np.random.default_rng(seed),
-            calibration_prior=prior,
-        )
+    options = DiagnosisOptions(field=field, attitude_frame=attitude_frame, seed=seed)
+    diagnosis = diagnose(telemetry, orbit=orbit, options=options, prior=calibration)
+    return diagnosis.report.to_json()

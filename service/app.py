@@ -179,7 +179,7 @@ def make_lifespan(
         try:
             yield
         finally:
-            state.diagnosis_pool.shutdown(wait=False, cancel_futures=True)
+            state.diagnoses.shutdown()
             scheduler.shutdown()
             job_runner.shutdown()
             engine.dispose()

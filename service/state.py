@@ -7,19 +7,19 @@ of field:
 * made with the app (:meth:`ServiceState.new`): settings, the admin key's hash, the rate-limit
   store and the in-process caches with their locks;
 * opened by the lifespan (:meth:`ServiceState.open`): the database engine, the metrics registry,
-  the job runner, the scheduler, the diagnosis pool and whether this process leads the
+  the job runner, the scheduler, the diagnoses' pool and whether this process leads the
   deployment. Reading one before the lifespan ran is a programming error (``AttributeError``).
 """
 
 from __future__ import annotations
 
 import asyncio
-import threading
-from concurrent.futures import Future, ThreadPoolExecutor
 from typing import TYPE_CHECKING, Any
 
 from starlette.datastructures import State
 from starlette.requests import Request
+
+from service.diagnosis_cache import DiagnosisCache
 
 if TYPE_CHECKING:
     from sqlalchemy.engine import Engine
@@ -47,17 +47,14 @@ class ServiceState(State):
     #: spacecraft id -> the served calibration's bytes (``routes.calibrations``)
     calibration_cache: dict[str, Any]
     calibration_locks: dict[str, asyncio.Lock]
-    #: (spacecraft id, prior) -> (answer key, report) of the latest diagnosis
-    diagnosis_cache: dict[tuple[str, bool], tuple[Any, dict[str, Any]]]
-    diagnosis_running: dict[tuple[str, bool], Future[dict[str, Any]]]
-    diagnosis_lock: threading.Lock
+    #: the latest diagnosis per (spacecraft id, prior) and the one computation running
+    diagnoses: DiagnosisCache
 
     # opened by the lifespan
     engine: Engine
     metrics: Metrics
     runner: JobRunner
     scheduler: FleetScheduler
-    diagnosis_pool: ThreadPoolExecutor
     leader: bool
 
     @classmethod
@@ -72,9 +69,7 @@ class ServiceState(State):
         state.key_lock = asyncio.Lock()
         state.calibration_cache = {}
         state.calibration_locks = {}
-        state.diagnosis_cache = {}
-        state.diagnosis_running = {}
-        state.diagnosis_lock = threading.Lock()
+        state.diagnoses = DiagnosisCache()
         return state
 
     def open(
@@ -86,13 +81,13 @@ class ServiceState(State):
         scheduler: FleetScheduler,
         leader: bool,
     ) -> None:
-        """Record what the lifespan opened (the diagnosis pool is made here)."""
+        """Record what the lifespan opened (and start the diagnoses' one-thread pool)."""
         self.engine = engine
         self.metrics = metrics
         self.runner = runner
         self.scheduler = scheduler
         self.leader = leader
-        self.diagnosis_pool = ThreadPoolExecutor(1, thread_name_prefix="orbitcal-diagnosis")
+        self.diagnoses.start()
 
 
 def service_state(request: Request) -> ServiceState:

@@ -119,7 +119,7 @@ def test_the_diagnosis_baseline_speaks_the_same_vocabulary(
     from orbitcal.orbit import Orbit
     from orbitcal.pipeline import diagnose
 
-    report = diagnose(world.telemetry, orbit=Orbit.from_tle(world.tle))
+    report = diagnose(world.telemetry, orbit=Orbit.from_tle(world.tle)).to_json()
     base = report["baseline"]
     assert base["n_holdout"] == 600 == cli_document["metrics"]["n_holdout"]  # the same rows
     assert base["holdout_rms_nt"] == pytest.approx(base["norm_holdout_rms_nt"] / math.sqrt(3.0),

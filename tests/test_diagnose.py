@@ -12,8 +12,9 @@ from contract_doc import CONTRACT_VERDICTS
 from test_diagnose_worlds import make_world
 
 from orbitcal.diagnose import CATALOGUE, EFFECT_NAMES, attribute
-from orbitcal.diagnose.api import diagnose_parts
+from orbitcal.diagnose.api import diagnose_data
 from orbitcal.diagnose.attribution import split_fit_tests
+from orbitcal.diagnose.options import AttributionOptions
 from orbitcal.diagnose.report import report_html
 
 pytestmark = pytest.mark.usefixtures("single_thread_blas")  # tests/conftest.py
@@ -27,9 +28,13 @@ def test_public_api_is_pinned() -> None:
             "CATALOGUE",
             "EFFECT_NAMES",
             "Attribution",
+            "AttributionOptions",
+            "Diagnosis",
             "DiagnosisData",
+            "DiagnosisOptions",
             "Effect",
             "EffectScore",
+            "Report",
             "SplitFit",
             "attribute",
             "build_report",
@@ -53,7 +58,10 @@ def test_catalogue_has_one_model_per_contract_effect() -> None:
 def test_null_world_names_no_effect(attitude: str) -> None:
     # Noise only (2 nT per axis): no candidate may beat it on the held-out blocks.
     for seed in (11, 12):
-        att = attribute(make_world("none", attitude=attitude, seed=seed).data, split_tests=False)
+        att = attribute(
+            make_world("none", attitude=attitude, seed=seed).data,
+            options=AttributionOptions(split_tests=False),
+        )
         assert att.verdict == "none", [(e.name, e.p_value) for e in att.effects[:3]]
         assert att.final_rms_nt == pytest.approx(att.baseline_rms_nt)
 
@@ -76,7 +84,7 @@ def test_null_world_names_no_effect(attitude: str) -> None:
 )
 def test_injected_effect_is_named_and_shrinks_the_gap(effect: str, attitude: str) -> None:
     world = make_world(effect, attitude=attitude, seed=3)
-    att = attribute(world.data, split_tests=False)
+    att = attribute(world.data, options=AttributionOptions(split_tests=False))
     assert att.verdict == effect, [(e.name, round(e.holdout_rms_after_nt, 2)) for e in att.effects]
     top = att.effects[0]
     assert top.significant and top.shrink > 1.3
@@ -88,7 +96,7 @@ def test_time_offset_parameter_recovered_under_tumbling() -> None:
     """With measured (GNSS) positions a time-tag error is the only candidate of its kind."""
     world = make_world("time_offset", magnitude=0.3, attitude="tumbling", seed=4)
     data = dataclasses.replace(world.data, positions_measured=True)
-    att = attribute(data, split_tests=False)
+    att = attribute(data, options=AttributionOptions(split_tests=False))
     assert att.verdict == "time_offset"
     # Injected: the sample tagged t holds B(t + 0.3 s); the model is b = dt dB/dt -> dt = +0.3 s.
     assert att.effects[0].params["dt_s"] == pytest.approx(0.3, abs=0.01)
@@ -101,7 +109,7 @@ def test_time_offset_and_along_track_error_reported_as_twins() -> None:
     differ by less than 3 sigma of the noise: whichever the training BIC names, the other is
     listed as indistinguishable from it."""
     world = make_world("time_offset", magnitude=0.3, attitude="tumbling", seed=4)
-    att = attribute(world.data, split_tests=False)
+    att = attribute(world.data, options=AttributionOptions(split_tests=False))
     assert att.verdict in ("time_offset", "orbit_error")
     twin = {"time_offset": "orbit_error", "orbit_error": "time_offset"}[att.verdict]
     assert att.effects[0].params["indistinguishable_from"] == [twin]
@@ -125,7 +133,8 @@ def test_split_fit_exposes_drift_by_time_blocks() -> None:
 
 def test_report_has_the_contract_keys_and_html_renders() -> None:
     world = make_world("external_field", attitude="tumbling", seed=7)
-    report, _att = diagnose_parts(world.data, rng=np.random.default_rng(0))
+    diagnosis = diagnose_data(world.data, rng=np.random.default_rng(0))
+    report = diagnosis.report.to_json()
     json.dumps(report, allow_nan=False)  # JSON-ready, no NaN
     assert set(report["baseline"]) >= {"method", "holdout_rms_nt"}
     assert report["verdict"] == "external_field"
@@ -263,7 +272,10 @@ def test_public_diagnose_on_telemetry(real_tles_text: str) -> None:
         attitude=NadirLVLH(),
         effects=[make_effect("nonlinearity")],
     )
-    report = diagnose(world.telemetry, orbit=Orbit.from_tle(tle.text), rng=np.random.default_rng(0))
+    diagnosis = diagnose(
+        world.telemetry, orbit=Orbit.from_tle(tle.text), rng=np.random.default_rng(0)
+    )
+    report = diagnosis.report.to_json()
     assert report["verdict"] == "nonlinearity"
     assert report["baseline"]["method"] == "linear-12"
     assert report["effects"][0]["holdout_rms_after_nt"] < report["baseline"]["holdout_rms_nt"]
@@ -385,13 +397,13 @@ def test_a_candidate_that_needs_an_unphysical_value_is_implausible() -> None:
     model is never negative), so the candidate is reported implausible and not named."""
     world = make_world("crustal_field", attitude="tumbling", seed=3)
     flipped = dataclasses.replace(world.data, b_crust_body_nt=-world.data.b_crust_body_nt)
-    att = attribute(flipped, split_tests=False)
+    att = attribute(flipped, options=AttributionOptions(split_tests=False))
     assert att.verdict != "crustal_field"
     crust = {e.name: e for e in att.effects}["crustal_field"]
     assert crust.implausible is not None and "crust_scale" in crust.implausible
     assert not crust.significant
     # The same world with the model the right way up: named, amplitude near 1, with an interval.
-    att = attribute(world.data, split_tests=False)
+    att = attribute(world.data, options=AttributionOptions(split_tests=False))
     assert att.verdict == "crustal_field" and not att.implausible.get("crustal_field")
     lo, hi = att.effects[0].intervals["crust_scale"]
     assert lo <= att.effects[0].params["crust_scale"] <= hi

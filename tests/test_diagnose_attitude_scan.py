@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from orbitcal.data import real_tles_text
+from orbitcal.diagnose.attitude_scan import AttitudeScan, design_attitude
 from orbitcal.diagnose.attribution import time_blocks
 from orbitcal.diagnose.bench import plan_compound_cases, simulate_compound_world
-from orbitcal.diagnose.effects import DesignBlock, _AttitudeScan, _design_attitude, get_effect
+from orbitcal.diagnose.effects import DesignBlock, get_effect
 
 #: The simulator's attitude error: three sinusoids of 5,400 s x (1, 1.3, 0.7).
 INJECTED_PERIODS_S = (3780.0, 5400.0, 7020.0)
@@ -34,7 +35,7 @@ def test_periods_found_beside_the_time_offset_are_the_injected_ones(attitude_and
     data, train = attitude_and_time_offset
     time_offset = get_effect("time_offset").design(data, train)
     assert time_offset is not None
-    block = _design_attitude(data, train, fixed=[time_offset])
+    block = design_attitude(data, train, fixed=[time_offset])
     assert block is not None
     found = _periods(block)
     assert len(found) == 3
@@ -49,7 +50,7 @@ def test_scan_basis_stays_orthonormal_when_a_fixed_block_repeats_the_calibration
     data, train = attitude_and_time_offset
     offset_x = np.zeros((data.n, 3, 1))
     offset_x[:, 0, 0] = 1.0
-    scan = _AttitudeScan(data, train, [DesignBlock(offset_x, ["offset_again_nt"])])
+    scan = AttitudeScan(data, train, [DesignBlock(offset_x, ["offset_again_nt"])])
     basis = scan.basis([5400.0])
     q = np.vstack([scan.q_rows(basis, a0, a1) for a0, a1 in scan.blocks()])
     assert q.shape[1] == 12 + 6  # the repeated offset contributes no direction
@@ -74,7 +75,7 @@ def test_beam_search_finds_the_periods_a_greedy_scan_locks_out(
     """Beside the time offset and the ring current, the greedy scan (a beam of one) takes a first
     period from the mixture of the three sinusoids and ends at 6,576 / 4,238 / 9,189 s, twice the
     training residual of the injected periods; a beam of three sets finds them."""
-    import orbitcal.diagnose.effects as effects
+    import orbitcal.diagnose.attitude_scan as attitude_scan
 
     data, train = attitude_time_offset_external
     fixed = [
@@ -82,8 +83,8 @@ def test_beam_search_finds_the_periods_a_greedy_scan_locks_out(
         for b in (get_effect(n).design(data, train) for n in ("time_offset", "external_field"))
         if b is not None
     ]
-    monkeypatch.setattr(effects, "ATTITUDE_BEAM", beam)
-    block = _design_attitude(data, train, fixed=fixed)
+    monkeypatch.setattr(attitude_scan, "ATTITUDE_BEAM", beam)
+    block = design_attitude(data, train, fixed=fixed)
     assert block is not None
     found = _periods(block)
     close = np.allclose(found, INJECTED_PERIODS_S, rtol=0.01)

@@ -134,7 +134,7 @@ def test_pair_screen_from_gram_matrices_equals_one_weighted_fit_per_pair(
     import dataclasses
     from itertools import combinations
 
-    from orbitcal.diagnose.attribution import Selection
+    from orbitcal.diagnose.attribution import GroupSelection
     from orbitcal.diagnose.prior import CalibrationPrior
 
     data, train, blocks = world
@@ -149,11 +149,11 @@ def test_pair_screen_from_gram_matrices_equals_one_weighted_fit_per_pair(
         if bl is not None:
             designs[name] = bl
     assert len(designs) >= 3
-    sel = Selection(data, train, holdout, designs)
+    sel = GroupSelection(data, train, holdout, designs)
     fixed = [blocks[0]]  # the crust selected before
     base = fit_joint(data, train, fixed)
-    sel._screen_huber_weights(data.b_raw_nt - base.predict_nt(data))
+    sel.screen_huber_weights(data.b_raw_nt - base.predict_nt(data))
     pairs = list(combinations(designs.values(), 2))
-    screened = sel._screen_pairs(fixed, pairs)
-    each = [sel._screen_rms(fixed, [a, b]) for a, b in pairs]
+    screened = sel.screen_pairs(fixed, pairs)
+    each = [sel.screen_rms(fixed, [a, b]) for a, b in pairs]
     np.testing.assert_allclose(screened, each, rtol=1e-9)

@@ -19,6 +19,7 @@ from orbitcal.diagnose.attribution import (
 )
 from orbitcal.diagnose.bench import CompoundCase, run_compound_case
 from orbitcal.diagnose.effects import get_effect
+from orbitcal.diagnose.options import AttributionOptions
 from orbitcal.metrics import norm_rms_nt
 
 pytestmark = pytest.mark.usefixtures("single_thread_blas")  # tests/conftest.py
@@ -339,7 +340,10 @@ def test_pick_names_the_simpler_of_two_models_the_held_out_data_cannot_tell_apar
 
 def test_compound_attribution_reports_dropped_effects_separately() -> None:
     """The Attribution lists what the backward step removed; never one of the selected."""
-    att = attribute(make_world("magnetorquer", attitude="tumbling", seed=3).data, split_tests=False)
+    att = attribute(
+        make_world("magnetorquer", attitude="tumbling", seed=3).data,
+        options=AttributionOptions(split_tests=False),
+    )
     assert att.verdict == "magnetorquer"
     assert not set(att.dropped) & set(att.selected)
 
@@ -384,12 +388,12 @@ def test_an_orbit_error_hidden_beside_a_time_offset_is_listed_as_its_near_twin(
 def test_auroral_crossings_are_cut_into_legs_at_their_highest_latitude() -> None:
     """Two crossings (a gap of 10 min between them) each split at its apex; a run whose apex is at
     its first sample stays whole."""
-    from orbitcal.diagnose.attribution import _fac_legs
+    from orbitcal.diagnose.attribution import fac_legs
 
     t = np.arange(0.0, 2000.0, 10.0)
     amlat = np.zeros(t.size)
     amlat[10:31] = 60.0 + 20.0 * np.sin(np.linspace(0.1, np.pi - 0.1, 21))  # apex at 20
     amlat[90:110] = np.linspace(85.0, 56.0, 20)  # leaves the oval from its highest latitude
     idx = np.flatnonzero(amlat > 55.0)
-    legs = _fac_legs(t, amlat, idx)
+    legs = fac_legs(t, amlat, idx)
     assert [(int(leg[0]), int(leg[-1])) for leg in legs] == [(10, 20), (21, 30), (90, 109)]

@@ -6,10 +6,10 @@ from functools import partial
 
 import numpy as np
 
-from orbitcal.diagnose.api import CRUST_KNOT_SPACING_S, _field_itrs
+from orbitcal.diagnose.prepare import CRUST_KNOT_SPACING_S, field_itrs_nt
 from orbitcal.diagnose.track import along_track
 
-crust = partial(_field_itrs, "LCS-1")
+crust = partial(field_itrs_nt, "LCS-1")
 
 
 def _track(t_s: np.ndarray) -> np.ndarray:

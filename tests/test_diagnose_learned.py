@@ -57,6 +57,7 @@ def _multi_day_data(days: float, *, crust: bool) -> object:
     """Swarm A (a real TLE), tumbling, a Swarm-class sensor; MF7 crust or none; no crust model."""
     from orbitcal.data import real_tles_text
     from orbitcal.diagnose.api import diagnosis_data
+    from orbitcal.diagnose.options import DiagnosisOptions
     from orbitcal.orbit import Orbit
     from orbitcal.simulate import Tumbling, make_effect, parse_tles, simulate_world
 
@@ -76,14 +77,15 @@ def _multi_day_data(days: float, *, crust: bool) -> object:
         effects=[make_effect("crustal_field", model="MF7")] if crust else [],
     )
     # No crustal model is offered: the crust stays in the residual for the learned model.
-    return diagnosis_data(world.telemetry, orbit=Orbit.from_tle(tle.text), crust_model=None)
+    options = DiagnosisOptions(crust_model=None)
+    return diagnosis_data(world.telemetry, orbit=Orbit.from_tle(tle.text), options=options)
 
 
 def test_learned_model_predicts_an_unmodelled_crust_on_held_out_passes() -> None:
-    from orbitcal.diagnose.api import diagnose_parts
+    from orbitcal.diagnose.api import diagnose_data
 
     data = _multi_day_data(4.0, crust=True)  # 11520 samples, ~61 orbits
-    report, _ = diagnose_parts(data, rng=np.random.default_rng(0))  # type: ignore[arg-type]
+    report = diagnose_data(data, rng=np.random.default_rng(0)).report.to_json()  # type: ignore[arg-type]
     learned = report["learned"]
     # Measured (seed 9, 4 days at 30 s): held-out RMS 3.47 nT before;
     # the patent's regional Legendre stage 3.40 nT; the spherical-harmonic stage (degree 40, chosen
@@ -106,10 +108,10 @@ def test_learned_model_does_not_invent_a_field_from_noise() -> None:
     # calibration leaves. Measured: cross-validation RMS 0.863 nT with no correction, 0.863 for
     # Legendre, 0.864 for the best spherical-harmonic fit (degree 5; 0.94 at degree 40): stage
     # "none", held-out 0.872 -> 0.872 nT.
-    from orbitcal.diagnose.api import diagnose_parts
+    from orbitcal.diagnose.api import diagnose_data
 
     data = _multi_day_data(4.0, crust=False)
-    report, _ = diagnose_parts(data, rng=np.random.default_rng(0))  # type: ignore[arg-type]
+    report = diagnose_data(data, rng=np.random.default_rng(0)).report.to_json()  # type: ignore[arg-type]
     learned = report["learned"]
     assert learned["stage_chosen"] == "none"
     assert learned["holdout_rms_after_nt"] <= 1.01 * learned["holdout_rms_before_nt"]
@@ -121,10 +123,10 @@ def test_learned_model_does_not_invent_a_field_from_noise() -> None:
 def test_learned_model_is_the_crust_candidate_without_a_crust_model() -> None:
     """No crustal model offered: the seed-003 model, fitted on the training blocks only, stands
     in for one, and the attribution names crustal_field on the held-out blocks."""
-    from orbitcal.diagnose.api import LEARNED_CRUST, diagnose_parts
+    from orbitcal.diagnose.api import LEARNED_CRUST, diagnose_data
 
     data = _multi_day_data(4.0, crust=True)
-    report, _ = diagnose_parts(data, rng=np.random.default_rng(0))  # type: ignore[arg-type]
+    report = diagnose_data(data, rng=np.random.default_rng(0)).report.to_json()  # type: ignore[arg-type]
     assert report["verdict"] == "crustal_field"
     top = report["effects"][0]
     assert top["params"]["variant"] == LEARNED_CRUST and top["significant"]

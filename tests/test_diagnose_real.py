@@ -11,6 +11,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import h5py
 import numpy as np
@@ -19,8 +20,10 @@ from scipy.spatial.transform import Rotation
 from shared_worlds import swarm_class_sensor
 
 from orbitcal import frames
-from orbitcal.diagnose.api import _field_body, diagnose_parts, diagnosis_data
+from orbitcal.diagnose.api import diagnose_data, diagnosis_data
 from orbitcal.diagnose.effects import DiagnosisData
+from orbitcal.diagnose.options import AttributionOptions, DiagnosisOptions
+from orbitcal.diagnose.prepare import field_body_nt
 from orbitcal.diagnose.prior import CalibrationPrior
 
 AUTH = Path(__file__).parent / "authorities"
@@ -32,6 +35,22 @@ pytestmark = pytest.mark.usefixtures("single_thread_blas")  # tests/conftest.py
 
 #: The synthetic sensor of the storm pass: 1 % matrix errors, 100 nT offsets, 1 nT noise.
 _STORM_RNG_SEED = 5
+
+
+def _diagnose_parts(
+    data: DiagnosisData,
+    *,
+    learned: bool = True,
+    holdout_blocks: int = AttributionOptions().holdout_blocks,
+    fit_mask: np.ndarray | None = None,
+    rng: np.random.Generator | None = None,
+) -> tuple[dict[str, Any], Any]:
+    """The report (as JSON) and the attribution of :func:`orbitcal.diagnose.diagnose_data`."""
+    options = DiagnosisOptions(
+        learned=learned, attribution=AttributionOptions(holdout_blocks=holdout_blocks)
+    )
+    diagnosis = diagnose_data(data, options=options, rng=rng, fit_mask=fit_mask)
+    return diagnosis.report.to_json(), diagnosis.attribution
 
 
 def _storm_sensor() -> tuple[np.ndarray, np.ndarray]:
@@ -122,8 +141,8 @@ def _swarm_storm_data(
         illumination=ill,
         sun_body=np.einsum("nij,nj->ni", rot, s_itrs),
         rc_index_nt=rc_e + rc_i,
-        b_ext_body_nt=_field_body("RC", t, r, rot),
-        b_crust_body_nt=_field_body("LCS-1", t, r, rot),
+        b_ext_body_nt=field_body_nt("RC", t, r, rot),
+        b_crust_body_nt=field_body_nt("LCS-1", t, r, rot),
         crust_model="LCS-1",
         calibration_prior=prior,
         positions_measured=True,  # Swarm's GPS positions
@@ -146,7 +165,7 @@ def test_swarm_storm_pass_external_field_and_auroral_currents() -> None:
     amlat = np.abs(data.mlat_deg)
     # 30 min only: the last 20 % is held out; fits use quiet |magnetic latitude| < 50 deg, as
     # Swarm processing does (the auroral crossing would otherwise drag the 12 parameters).
-    report, att = diagnose_parts(data, learned=False, holdout_blocks=2, fit_mask=amlat < 50.0)
+    report, att = _diagnose_parts(data, learned=False, holdout_blocks=2, fit_mask=amlat < 50.0)
     assert report["baseline"]["calibration_prior"]["source"].startswith("calibration document")
     assert report["verdict"] == "external_field"
     ext = report["effects"][0]
@@ -196,7 +215,7 @@ def test_swarm_storm_pass_without_a_prior() -> None:
     from orbitcal.diagnose.bounds import param_range
 
     data, lat, rot = _swarm_storm_data()
-    report, att = diagnose_parts(
+    report, att = _diagnose_parts(
         data, learned=False, holdout_blocks=2, fit_mask=np.abs(data.mlat_deg) < 50.0
     )
     assert report["verdict"] == "external_field"
@@ -268,8 +287,10 @@ def test_real_orbit_error_from_an_older_tle(attitude: str) -> None:
     )
     truth_km = world.truth["effects"][0]["info"]["along_track_km_mean"]
     assert abs(truth_km) > 1.0  # a week-old element set is km off along track
-    data = diagnosis_data(world.telemetry, orbit=Orbit.from_tle(old.text), crust_model=None)  # type: ignore[attr-defined]
-    report, att = diagnose_parts(data, learned=False)
+    options = DiagnosisOptions(crust_model=None)
+    orbit = Orbit.from_tle(old.text)  # type: ignore[attr-defined]
+    data = diagnosis_data(world.telemetry, orbit=orbit, options=options)
+    report, att = _diagnose_parts(data, learned=False)
     assert report["verdict"] == "orbit_error"
     assert report["final"]["effects"] == ["orbit_error"]
     top = report["effects"][0]
@@ -307,7 +328,7 @@ def test_real_crust_mf7_found_with_lcs1() -> None:
     )
     data = diagnosis_data(world.telemetry, orbit=Orbit.from_tle(tle.text))  # type: ignore[attr-defined]
     assert data.crust_model == "LCS-1"
-    report, _ = diagnose_parts(data, rng=np.random.default_rng(0))
+    report, _ = _diagnose_parts(data, rng=np.random.default_rng(0))
     assert report["verdict"] == "crustal_field"
     crust = report["effects"][0]
     assert crust["shrink"] > 1.3

@@ -9,11 +9,12 @@ writes the CONTRACT section-5 report (and optionally a self-contained HTML page 
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from orbitcal.cli._inputs import add_field_argument, add_table_arguments, load_orbit, load_table
-from orbitcal.diagnose.prior import DEFAULT_SIGMA_MATRIX, DEFAULT_SIGMA_OFFSET_NT
+from orbitcal.diagnose.options import DiagnosisOptions
+
+_DEFAULTS = DiagnosisOptions()
 
 __all__ = ["register", "run"]
 
@@ -45,33 +46,45 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument(
         "--prior-sigma-matrix",
         type=float,
-        default=DEFAULT_SIGMA_MATRIX,
+        default=_DEFAULTS.prior_sigma_matrix,
         metavar="S",
-        help=f"prior standard deviation of each matrix element (default {DEFAULT_SIGMA_MATRIX:g})",
+        help="prior standard deviation of each matrix element "
+        f"(default {_DEFAULTS.prior_sigma_matrix:g})",
     )
     p.add_argument(
         "--prior-sigma-offset",
         type=float,
-        default=DEFAULT_SIGMA_OFFSET_NT,
+        default=_DEFAULTS.prior_sigma_offset_nt,
         metavar="NT",
-        help=f"prior standard deviation of each offset in nT (default {DEFAULT_SIGMA_OFFSET_NT:g})",
+        help="prior standard deviation of each offset in nT "
+        f"(default {_DEFAULTS.prior_sigma_offset_nt:g})",
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of the learned model (default 0)")
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=_DEFAULTS.seed,
+        help=f"seed of the learned model (default {_DEFAULTS.seed})",
+    )
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    """Execute ``orbitcal diagnose``; bad input raises CliError or a typed ValueError (exit 2)."""
-    import numpy as np
-
-    from orbitcal.blas import one_blas_thread
-    from orbitcal.diagnose.api import diagnose_parts, diagnosis_data
+    """Execute ``orbitcal diagnose``; bad input raises CliError or an OrbitcalError (exit != 0)."""
+    from orbitcal.diagnose.api import diagnose
+    from orbitcal.diagnose.options import DiagnosisOptions
     from orbitcal.diagnose.report import report_html
     from orbitcal.field import get_field
     from orbitcal.memory import release_freed_arrays, trim_heap
 
     release_freed_arrays()
     get_field(args.field)  # unknown names fail before any reading
+    options = DiagnosisOptions(
+        field=args.field,
+        attitude_frame=args.attitude_frame,
+        prior_sigma_matrix=args.prior_sigma_matrix,
+        prior_sigma_offset_nt=args.prior_sigma_offset,
+        seed=args.seed,
+    )
     tel = load_table(
         args,
         "diagnose",
@@ -81,31 +94,17 @@ def run(args: argparse.Namespace) -> int:
     prior = None
     if args.calibration:
         from orbitcal.calibrate.document import read_document
-        from orbitcal.diagnose.prior import prior_from_document
 
-        prior = prior_from_document(
-            read_document(args.calibration),
-            sigma_a=args.prior_sigma_matrix,
-            sigma_o_nt=args.prior_sigma_offset,
-        )
+        prior = read_document(args.calibration)
     trim_heap()
-    with one_blas_thread():
-        data = diagnosis_data(
-            tel,
-            orbit=orbit,
-            field=args.field,
-            attitude_frame=args.attitude_frame,
-            calibration_prior=prior,
-        )
-        del tel, orbit  # the diagnosis holds what it needs of them
-        trim_heap()
-        report, _att = diagnose_parts(data, rng=np.random.default_rng(args.seed))
-        Path(args.out).write_text(json.dumps(report, indent=1) + "\n")
-        if args.html:
-            Path(args.html).write_text(report_html(report))
+    diagnosis = diagnose(tel, orbit=orbit, options=options, prior=prior)
+    report = diagnosis.report
+    Path(args.out).write_text(report.to_json_text(indent=1) + "\n")
+    if args.html:
+        Path(args.html).write_text(report_html(report.to_json()))
     print(
-        f"verdict: {report['verdict']}; held-out RMS {report['baseline']['holdout_rms_nt']} nT "
-        f"-> {report['final']['holdout_rms_nt']} nT; report written to {args.out}"
+        f"verdict: {report.verdict}; held-out RMS {report.baseline_holdout_rms_nt} nT "
+        f"-> {report.final_holdout_rms_nt} nT; report written to {args.out}"
         + (f", HTML page to {args.html}" if args.html else "")
     )
     return 0

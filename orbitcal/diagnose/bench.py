@@ -23,6 +23,7 @@ Scores:
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -31,12 +32,14 @@ from typing import Any
 
 import numpy as np
 
-from orbitcal.diagnose.attribution import attribute, fit_joint
-from orbitcal.diagnose.effects import EFFECT_NAMES, get_effect
+from orbitcal.diagnose.attribution import Attribution, fit_joint
+from orbitcal.diagnose.effects import EFFECT_NAMES, DiagnosisData, get_effect
+from orbitcal.diagnose.options import AttributionOptions, DiagnosisOptions
 from orbitcal.metrics import norm_rms_nt
 
 __all__ = [
     "BENCH_CLASSES",
+    "BENCH_OPTIONS",
     "MAGNITUDES",
     "BenchCase",
     "confusion_matrix",
@@ -45,6 +48,10 @@ __all__ = [
     "run_case",
     "summarise",
 ]
+
+#: The benchmark's diagnosis: no learned model and no split-fit tests (the worlds are scored on
+#: the held-out attribution alone); the crustal model is the run's.
+BENCH_OPTIONS = DiagnosisOptions(learned=False, attribution=AttributionOptions(split_tests=False))
 
 #: Perfect-oracle shrink below 1 + this: the injected effect leaves no gap to diagnose (the
 #: diagnosis' own ``min_gain``).
@@ -203,8 +210,16 @@ def _world_and_data(
         attitude=attitude,
         effects=effects,
     )
-    data = diagnosis_data(world.telemetry, orbit=Orbit.from_tle(tle.text), crust_model=crust_model)
+    options = dataclasses.replace(BENCH_OPTIONS, crust_model=crust_model)
+    data = diagnosis_data(world.telemetry, orbit=Orbit.from_tle(tle.text), options=options)
     return world, data
+
+
+def _diagnosed(data: DiagnosisData) -> Attribution:
+    """The blind diagnosis of a world (:func:`orbitcal.diagnose.diagnose_data`): its attribution."""
+    from orbitcal.diagnose.api import diagnose_data
+
+    return diagnose_data(data, options=BENCH_OPTIONS).attribution
 
 
 def run_case(
@@ -230,7 +245,7 @@ def run_case(
         cadence_s=cadence_s,
         crust_model=crust_model,
     )
-    att = attribute(data, split_tests=False)
+    att = _diagnosed(data)
     elapsed = time.perf_counter() - t0
 
     # Oracle 1: knows the effect, fits its catalogue model the same way.
@@ -238,7 +253,7 @@ def run_case(
     if case.effect != "none":
         block = get_effect(case.effect).design(data, att.train)
         if block is not None:
-            from orbitcal.diagnose.attribution import _resolve
+            from orbitcal.diagnose.attribution.joint_fit import _resolve
 
             chosen = _resolve(data, att.train, [], block)
             fit = fit_joint(data, att.train, [chosen])
@@ -246,7 +261,6 @@ def run_case(
             oracle_rms = norm_rms_nt(r[att.holdout])
     # Oracle 2: subtracts the injected field (in sensor axes) and calibrates.
     injected = sum(world.injected_body_nt.values(), np.zeros_like(data.b_raw_nt))
-    from orbitcal.diagnose.effects import DiagnosisData
 
     clean = DiagnosisData(
         t_utc_s=data.t_utc_s,
@@ -528,13 +542,12 @@ def run_compound_case(
     counts the observable ones. A selected effect listed as indistinguishable from an injected one
     (or the reverse) counts as found, not as spurious.
     """
-    from orbitcal.diagnose.effects import DiagnosisData
 
     t0 = time.perf_counter()
     world, data = simulate_compound_world(
         case, tle_text=tle_text, n_orbits=n_orbits, cadence_s=cadence_s, crust_model=crust_model
     )
-    att = attribute(data, split_tests=False)
+    att = _diagnosed(data)
     elapsed = time.perf_counter() - t0
 
     a_sensor = np.asarray(world.sensor.a_matrix)

@@ -47,6 +47,7 @@ interpolation). A whole call takes about 4 s of one core for 10^4 to 4 x 10^4 sa
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -518,40 +519,12 @@ def learned_field_model(
 
     # Patent step 3: the BP network on what the stage leaves.
     lo_lat, hi_lat, lo_lon, hi_lon = box(train)
-    inputs = [scale(lat, lo_lat, hi_lat), scale(lon, lo_lon, hi_lon)]
-    names = ["latitude", "longitude"]
-    if float(np.ptp(radius[train])) > 1.0:
-        inputs.append(scale(radius, float(radius[train].min()), float(radius[train].max())))
-        names.append("radius")
-    phi = data.mlt_angle_rad
-    if phi is not None:
-        inputs += [np.sin(phi), np.cos(phi)]
-        names += ["sin_mlt", "cos_mlt"]
-    if data.rc_index_nt is not None and float(np.std(data.rc_index_nt[train])) > 1.0:
-        rc = data.rc_index_nt
-        inputs.append((rc - float(np.mean(rc[train]))) / float(np.std(rc[train])))
-        names.append("rc_index")
-    x = np.column_stack(inputs)
-    n_in = x.shape[1]
-    # Fitted on the training blocks but the last fold, validated on that last fold (later in
-    # time, as the held-out blocks are).
-    fit_net = train & (fold < n_folds - 1) if n_folds >= 2 else train
-    valid = train & (fold == n_folds - 1) if n_folds >= 2 else train
-    idx = np.flatnonzero(fit_net)
-    if idx.size > NET_MAX_SAMPLES:
-        idx = idx[np.linspace(0, idx.size - 1, NET_MAX_SAMPLES).round().astype(np.intp)]
-    theta, y_scale = _fit_net(x[idx], rest[idx], rng, max_nfev)
-    net = _net(theta, x, n_in) * y_scale
-    # Regional (the patent's region S): no correction outside the box of the network's inputs.
-    xt = x[fit_net]
-    lo_in = xt.min(axis=0)
-    hi_in = xt.max(axis=0)
-    pad = 0.02 * (hi_in - lo_in)
-    inside = np.all((x >= lo_in - pad) & (x <= hi_in + pad), axis=1) & inside_box
-    net[~inside] = 0.0
-    val_without = norm_rms_nt(rest[valid])
-    val_with = norm_rms_nt((rest - net)[valid])
-    net_used = bool(val_with < (1.0 - NET_MIN_GAIN) * val_without)
+    x, names = _network_inputs(
+        data, scale(lat, lo_lat, hi_lat), scale(lon, lo_lon, hi_lon), radius, train, scale
+    )
+    net, inside, val_without, val_with, net_used = _network_stage(
+        x, rest, train, fold, n_folds, inside_box, rng, max_nfev
+    )
     after_nec = stage_pred + (net if net_used else 0.0)
 
     def body(v_nec: FloatArray) -> FloatArray:
@@ -596,3 +569,63 @@ def learned_field_model(
         },
     }
     return summary, body(after_nec)
+
+
+def _network_inputs(
+    data: DiagnosisData,
+    lat_scaled: FloatArray,
+    lon_scaled: FloatArray,
+    radius: FloatArray,
+    train: BoolArray,
+    scale: Callable[[FloatArray, float, float], FloatArray],
+) -> tuple[FloatArray, list[str]]:
+    """The network's inputs (scaled to [-1, 1] on the training samples) and their names."""
+    inputs = [lat_scaled, lon_scaled]
+    names = ["latitude", "longitude"]
+    if float(np.ptp(radius[train])) > 1.0:
+        inputs.append(scale(radius, float(radius[train].min()), float(radius[train].max())))
+        names.append("radius")
+    phi = data.mlt_angle_rad
+    if phi is not None:
+        inputs += [np.sin(phi), np.cos(phi)]
+        names += ["sin_mlt", "cos_mlt"]
+    if data.rc_index_nt is not None and float(np.std(data.rc_index_nt[train])) > 1.0:
+        rc = data.rc_index_nt
+        inputs.append((rc - float(np.mean(rc[train]))) / float(np.std(rc[train])))
+        names.append("rc_index")
+    return np.column_stack(inputs), names
+
+
+def _network_stage(
+    x: FloatArray,
+    rest: FloatArray,
+    train: BoolArray,
+    fold: npt.NDArray[np.intp],
+    n_folds: int,
+    inside_box: BoolArray,
+    rng: np.random.Generator,
+    max_nfev: int,
+) -> tuple[FloatArray, BoolArray, float, float, bool]:
+    """Patent step 3 on what the stage leaves: the network's correction (zero outside the box of
+    its inputs), that box, its validation RMS without and with it, and whether it is used."""
+    n_in = x.shape[1]
+    # Fitted on the training blocks but the last fold, validated on that last fold (later in
+    # time, as the held-out blocks are).
+    fit_net = train & (fold < n_folds - 1) if n_folds >= 2 else train
+    valid = train & (fold == n_folds - 1) if n_folds >= 2 else train
+    idx = np.flatnonzero(fit_net)
+    if idx.size > NET_MAX_SAMPLES:
+        idx = idx[np.linspace(0, idx.size - 1, NET_MAX_SAMPLES).round().astype(np.intp)]
+    theta, y_scale = _fit_net(x[idx], rest[idx], rng, max_nfev)
+    net = _net(theta, x, n_in) * y_scale
+    # Regional (the patent's region S): no correction outside the box of the network's inputs.
+    xt = x[fit_net]
+    lo_in = xt.min(axis=0)
+    hi_in = xt.max(axis=0)
+    pad = 0.02 * (hi_in - lo_in)
+    inside = np.all((x >= lo_in - pad) & (x <= hi_in + pad), axis=1) & inside_box
+    net[~inside] = 0.0
+    val_without = norm_rms_nt(rest[valid])
+    val_with = norm_rms_nt((rest - net)[valid])
+    net_used = bool(val_with < (1.0 - NET_MIN_GAIN) * val_without)
+    return net, inside, val_without, val_with, net_used

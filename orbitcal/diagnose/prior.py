@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from orbitcal.arrays import FloatArray
+from orbitcal.errors import BadInputError
 
 __all__ = [
     "DEFAULT_SIGMA_MATRIX",
@@ -53,6 +54,11 @@ class CalibrationPrior:
         Standard deviation of each offset [nT].
     source : str
         Where it came from (e.g. ``"calibration document v3 (linear)"``).
+    version : int, optional
+        The version of the calibration document it came from, named in the report's
+        ``baseline.calibration_prior`` when ``names_version`` (the service's diagnosis does).
+    names_version : bool
+        Whether :meth:`summary` names ``version``.
     """
 
     a: FloatArray
@@ -60,22 +66,31 @@ class CalibrationPrior:
     sigma_a: float = DEFAULT_SIGMA_MATRIX
     sigma_o_nt: float = DEFAULT_SIGMA_OFFSET_NT
     source: str = "given"
+    version: int | None = None
+    names_version: bool = False
 
     def __post_init__(self) -> None:
         if np.shape(self.a) != (3, 3) or np.shape(self.o_nt) != (3,):
-            raise ValueError("a calibration prior needs a 3x3 matrix and 3 offsets")
+            raise BadInputError("a calibration prior needs a 3x3 matrix and 3 offsets")
         if not (np.all(np.isfinite(self.a)) and np.all(np.isfinite(self.o_nt))):
-            raise ValueError("a calibration prior must be finite")
+            raise BadInputError("a calibration prior must be finite")
         if not (self.sigma_a > 0.0 and self.sigma_o_nt > 0.0):
-            raise ValueError("prior standard deviations must be positive")
+            raise BadInputError(
+                "prior standard deviations must be positive (--prior-sigma-matrix, "
+                "--prior-sigma-offset)",
+                field="sigma",
+            )
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready description for reports."""
-        return {
+        out: dict[str, Any] = {
             "source": self.source,
             "sigma_matrix": self.sigma_a,
             "sigma_offset_nt": self.sigma_o_nt,
         }
+        if self.names_version:
+            out["version"] = self.version
+        return out
 
 
 def prior_from_document(
@@ -83,26 +98,39 @@ def prior_from_document(
     *,
     sigma_a: float = DEFAULT_SIGMA_MATRIX,
     sigma_o_nt: float = DEFAULT_SIGMA_OFFSET_NT,
+    names_version: bool = False,
 ) -> CalibrationPrior:
     """The prior of a CONTRACT section-4 calibration document.
 
     The document's ``linear`` part (``b_cal = M @ (b_raw - o)``, exact for linear methods and the
     best linear approximation otherwise) gives the forward model ``b_raw = M^-1 b_true + o``.
+    With ``names_version`` the report names the document's version.
 
     Raises
     ------
-    ValueError
+    BadInputError
         No ``linear`` part, or a singular ``M``.
     """
     lin = doc.get("linear")
     if not isinstance(lin, dict) or "M" not in lin or "o" not in lin:
-        raise ValueError("calibration document lacks linear.M and linear.o")
-    m = np.asarray(lin["M"], dtype=np.float64)
-    o = np.asarray(lin["o"], dtype=np.float64)
+        raise BadInputError(
+            "calibration document lacks linear.M and linear.o: give a section-4 document",
+            field="linear",
+        )
+    try:
+        m = np.asarray(lin["M"], dtype=np.float64)
+        o = np.asarray(lin["o"], dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise BadInputError(
+            f"calibration document: linear.M and linear.o must be numbers ({exc})", field="linear"
+        ) from exc
     if m.shape != (3, 3) or o.shape != (3,):
-        raise ValueError("calibration document: linear.M must be 3x3 and linear.o have 3 values")
+        raise BadInputError(
+            "calibration document: linear.M must be 3x3 and linear.o have 3 values",
+            field="linear",
+        )
     if abs(float(np.linalg.det(m))) < 1e-12:
-        raise ValueError("calibration document: linear.M is singular")
+        raise BadInputError("calibration document: linear.M is singular", field="linear.M")
     version = doc.get("version")
     method = doc.get("method", "?")
     label = f"calibration document v{version} ({method})" if version is not None else str(method)
@@ -112,4 +140,6 @@ def prior_from_document(
         sigma_a=sigma_a,
         sigma_o_nt=sigma_o_nt,
         source=label,
+        version=version,
+        names_version=names_version,
     )

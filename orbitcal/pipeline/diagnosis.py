@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from orbitcal.telemetry import Telemetry
+
+if TYPE_CHECKING:  # pragma: no cover
+    from orbitcal.diagnose.result import Report
 
 __all__ = ["diagnose"]
 
@@ -19,24 +22,18 @@ def diagnose(
     field: str = "IGRF-14",
     prior_document: dict[str, Any] | None = None,
     rng: np.random.Generator | None = None,
-) -> dict[str, Any]:
+) -> Report:
     """The section-5 diagnosis report of ``telemetry`` (:func:`orbitcal.diagnose.diagnose`).
 
     ``prior_document``: a calibration document (e.g. the one in service) whose linear part is a
-    prior on the 12 parameters (:mod:`orbitcal.diagnose.prior`).
+    prior on the 12 parameters (:mod:`orbitcal.diagnose.prior`); the report names its version.
     """
-    from orbitcal.diagnose import diagnose as run
+    from orbitcal.diagnose.api import diagnose as run
+    from orbitcal.diagnose.options import DiagnosisOptions
     from orbitcal.diagnose.prior import prior_from_document
 
-    return dict(
-        run(
-            telemetry,
-            orbit=orbit,
-            field=field,
-            attitude_frame=attitude_frame,
-            rng=rng if rng is not None else np.random.default_rng(0),
-            calibration_prior=(
-                prior_from_document(prior_document) if prior_document is not None else None
-            ),
-        )
+    prior = (
+        None if prior_document is None else prior_from_document(prior_document, names_version=True)
     )
+    options = DiagnosisOptions(field=field, attitude_frame=attitude_frame)
+    return run(telemetry, orbit=orbit, options=options, prior=prior, rng=rng).report

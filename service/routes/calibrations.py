@@ -7,9 +7,9 @@ import hashlib
 import hmac
 import re
 import time
-from concurrent.futures import Future
 from dataclasses import dataclass
-from typing import Annotated, Any
+from functools import partial
+from typing import TYPE_CHECKING, Annotated, Any
 
 import numpy as np
 import orjson
@@ -23,6 +23,7 @@ from orbitcal.errors import BadInputError, ConflictError
 from orbitcal.metrics import norm_rms_nt, rms_nt
 from service.auth import Principal, require_scope
 from service.deps import EngineDep, SettingsDep, get_spacecraft, iso
+from service.diagnosis_cache import DiagnosisCache
 from service.jobs import create_job
 from service.routes.exports import FormatQuery, HkQuery, NamesQuery, export_response
 from service.schemas import (
@@ -33,6 +34,9 @@ from service.schemas import (
     RetrainIn,
 )
 from service.storage import Calibration, Job, hash_key, read_tx, read_window
+
+if TYPE_CHECKING:  # pragma: no cover
+    from orbitcal.diagnose.result import Report
 
 __all__ = ["CalibrationFastPath", "ServedCalibration", "answer_key", "router"]
 
@@ -394,7 +398,7 @@ def answer_key(sc: Any, doc: dict[str, Any] | None, settings: Any) -> tuple[Any,
     )
 
 
-def _compute_diagnosis(app: Any, spacecraft_id: str, prior: bool) -> dict[str, Any]:
+def _compute_diagnosis(app: Any, spacecraft_id: str, prior: bool) -> Report:
     settings = app.state.settings
     sc, tel, doc = _recent_telemetry(app.state.engine, spacecraft_id, settings)
     if prior and doc is None:
@@ -415,10 +419,8 @@ def _compute_diagnosis(app: Any, spacecraft_id: str, prior: bool) -> dict[str, A
         field=settings.reference_field,
         prior_document=doc if prior else None,
     )
-    if prior:
-        report["baseline"]["calibration_prior"]["version"] = doc.get("version")
     # keyed on the snapshot the report was computed from (read in one transaction)
-    app.state.diagnosis_cache[(spacecraft_id, prior)] = (answer_key(sc, doc, settings), report)
+    app.state.diagnoses.store((spacecraft_id, prior), answer_key(sc, doc, settings), report)
     return report
 
 
@@ -431,18 +433,6 @@ def _current_key(engine: Any, spacecraft_id: str, settings: Any) -> tuple[Any, .
             )
         ).scalar_one_or_none()
     return answer_key(sc, doc, settings)
-
-
-def _diagnosis_future(app: Any, spacecraft_id: str, prior: bool) -> Future[dict[str, Any]]:
-    """The running computation for this spacecraft, or a new one (one at a time per spacecraft)."""
-    running: dict[tuple[str, bool], Future[dict[str, Any]]] = app.state.diagnosis_running
-    key = (spacecraft_id, prior)
-    with app.state.diagnosis_lock:
-        fut = running.get(key)
-        if fut is None or fut.done():
-            fut = app.state.diagnosis_pool.submit(_compute_diagnosis, app, spacecraft_id, prior)
-            running[key] = fut
-        return fut
 
 
 @router.get(
@@ -480,18 +470,19 @@ async def diagnosis(
     when none is in service.
     """
     app = request.app
+    diagnoses: DiagnosisCache = app.state.diagnoses
     current = await run_in_threadpool(_current_key, engine, spacecraft_id, app.state.settings)
     key = (spacecraft_id, prior)
-    hit = app.state.diagnosis_cache.get(key)
+    hit = diagnoses.latest(key)
     if hit is not None and (cached or hit[0] == current):
-        return hit[1]  # type: ignore[no-any-return]
+        return hit[1].to_json()
     if cached:
-        computing = app.state.diagnosis_running.get(key)
-        state = "one is being computed" if computing and not computing.done() else "none asked for"
+        state = "one is being computed" if diagnoses.computing(key) else "none asked for"
         raise HTTPException(
             status_code=404,
             detail=f"no diagnosis of {spacecraft_id!r} yet ({state}); "
             "GET without cached=true computes one",
         )
-    fut = _diagnosis_future(app, spacecraft_id, prior)
-    return await asyncio.wrap_future(fut)  # the library's typed errors: one handler, app.py
+    fut = diagnoses.future(key, partial(_compute_diagnosis, app, spacecraft_id, prior))
+    report = await asyncio.wrap_future(fut)  # the library's typed errors: one handler, app.py
+    return report.to_json()

@@ -20,6 +20,7 @@ from fastapi.responses import HTMLResponse, RedirectResponse, Response
 from service.auth import Principal, require_scope
 from service.deps import EngineDep, get_spacecraft, iso, iso_or_none
 from service.schemas import ErrorPublic
+from service.state import service_state
 from service.storage import IngestLog, Job, read_tx
 
 __all__ = ["CSP", "DOCS_ASSETS", "router"]
@@ -255,11 +256,11 @@ def latest_diagnosis(
     with read_tx(engine) as conn:
         get_spacecraft(conn, spacecraft_id)
     key = (spacecraft_id, prior)
-    hit = request.app.state.diagnosis_cache.get(key)
+    diagnoses = service_state(request).diagnoses
+    hit = diagnoses.latest(key)
     if hit is not None:
-        return {"state": "ready", "report": hit[1]}
-    running = request.app.state.diagnosis_running.get(key)
-    return {"state": "computing" if running and not running.done() else "none", "report": None}
+        return {"state": "ready", "report": hit[1].to_json()}
+    return {"state": "computing" if diagnoses.computing(key) else "none", "report": None}
 
 
 @router.get("/v1/spacecraft/{spacecraft_id}/diagnosis/report.html", responses={**_ERRORS, **_HTML})
@@ -275,11 +276,11 @@ def diagnosis_report_html(
 
     with read_tx(engine) as conn:
         get_spacecraft(conn, spacecraft_id)
-    hit = request.app.state.diagnosis_cache.get((spacecraft_id, prior))
+    hit = service_state(request).diagnoses.latest((spacecraft_id, prior))
     if hit is None:
         raise HTTPException(
             status_code=404,
             detail=f"no diagnosis of {spacecraft_id!r} yet; GET .../diagnosis computes one",
         )
-    page = report_html(hit[1], title=f"orbitcal diagnosis of {spacecraft_id}")
+    page = report_html(hit[1].to_json(), title=f"orbitcal diagnosis of {spacecraft_id}")
     return HTMLResponse(page, headers={"Cache-Control": "no-store"})

@@ -34,7 +34,7 @@ def test_the_state_is_one_typed_object_made_with_the_app_and_opened_by_the_lifes
     with TestClient(app) as http:
         assert http.get("/healthz").status_code == 200
         assert state.engine is not None and state.metrics is not None
-        assert state.leader in (True, False) and state.diagnosis_pool is not None
+        assert state.leader in (True, False) and state.diagnoses is not None
         assert http.get("/v1/spacecraft", headers={"X-API-Key": "k"}).json() == []
 
 
@@ -44,7 +44,7 @@ def test_unsafe_settings_are_refused_before_anything_is_built(tmp_path: Path) ->
     with pytest.raises(ValueError, match="without authentication"):
         refuse_unsafe_settings(_settings(tmp_path, auth=False, bind_host="0.0.0.0"))
     state = new_state(_settings(tmp_path))
-    assert isinstance(state, ServiceState) and state.diagnosis_cache == {}
+    assert isinstance(state, ServiceState) and state.diagnoses.latest(("any", False)) is None
 
 
 def test_the_server_is_given_the_limits_of_the_settings(tmp_path: Path) -> None:

@@ -267,11 +267,13 @@ def _report() -> dict[str, Any]:
 
 
 def _set_report(server: LiveServer, report: dict[str, Any] | None) -> None:
-    cache = server.app.state.diagnosis_cache
+    from orbitcal.diagnose import Report
+
+    cache = server.app.state.diagnoses
     if report is None:
-        cache.pop(("swarm-a", False), None)
-    else:
-        cache[("swarm-a", False)] = (None, report)  # cached=true answers it whatever the key
+        cache.forget(("swarm-a", False))
+    else:  # cached=true answers it whatever the key
+        cache.store(("swarm-a", False), None, Report.from_json(report))
 
 
 def test_diagnosis_report_html(fleet: Fleet) -> None:

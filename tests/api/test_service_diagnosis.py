@@ -78,3 +78,33 @@ def test_diagnosis_over_http_names_the_injected_magnetorquer_coupling(tmp_path: 
         assert with_prior["verdict"] == "magnetorquer"
         # The plain report is cached apart and unchanged.
         assert c.get("/v1/spacecraft/sw-a/diagnosis?cached=true").json() == report
+
+
+def test_diagnosis_of_ten_samples_is_a_422_that_says_what_to_do(tmp_path: Path) -> None:
+    """Issue 23: ten samples are too few for held-out blocks; the library's NotEnoughDataError
+    reaches the caller as a 4xx with its reason (it was an HTTP 500 before)."""
+    world = simulate_world(
+        REAL_TLES_FILE.read_text(),
+        norad_id=39452,
+        start_utc_s=float(iso_to_utc_s(["2022-08-02T00:00:00Z"])[0]),
+        duration_s=100.0,
+        cadence_s=10.0,
+        rng=np.random.default_rng(7),
+        effects=[],
+    )
+    assert world.tle is not None and len(world.telemetry) == 10
+    buf = io.BytesIO()
+    world.telemetry.to_frame().to_parquet(buf, index=False)
+    settings = sqlite_settings(tmp_path, window_s=86400.0)
+    with live_server(settings) as s, s.client() as c:
+        tle = f"{world.tle.line1}\n{world.tle.line2}"
+        assert c.post("/v1/spacecraft", json={"id": "sw-a", "tle": tle}).status_code == 201
+        r = c.post(
+            "/v1/spacecraft/sw-a/telemetry",
+            content=buf.getvalue(),
+            headers={"content-type": "application/vnd.apache.parquet"},
+        )
+        assert r.status_code == 200 and r.json()["accepted"] == 10, r.text
+        r = c.get("/v1/spacecraft/sw-a/diagnosis", timeout=120)
+        assert r.status_code == 422, r.text
+        assert "too few samples" in r.text and "provide" in r.text

@@ -1,0 +1,364 @@
+"""The attitude-error scan: the periods of the sinusoids of ``dtheta(t)`` found on the data.
+
+An attitude error ``db = dtheta x B`` with ``dtheta`` a sum of up to three sinusoids: the periods
+are chosen by a scan of the training residual (a beam search with refinement passes), alone or
+beside effects already selected (:attr:`orbitcal.diagnose.effects.Effect.design_beside`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Sequence
+from functools import partial
+
+import numpy as np
+
+from orbitcal.arrays import BoolArray, FloatArray
+from orbitcal.diagnose.columns import (
+    FunctionColumns,
+    Index,
+    triangular_factor,
+)
+from orbitcal.diagnose.data import DiagnosisData
+from orbitcal.diagnose.design import DesignBlock
+
+__all__ = ["ATTITUDE_PERIODS_S", "AttitudeScan", "design_attitude"]
+
+
+#: Periods scanned for the attitude-error sinusoids [s] (log-spaced), and how many are kept.
+ATTITUDE_PERIODS_S = np.geomspace(1200.0, 30000.0, 160)
+ATTITUDE_MAX_TERMS = 3
+#: At most this many passes of the cyclic period refinement (it stops at the first pass that
+#: changes no period).
+ATTITUDE_REFINE_PASSES = 8
+#: Sets of periods carried from one greedy step of the scan to the next (beam search).
+ATTITUDE_BEAM = 3
+
+#: The rows of the scan's orthonormal basis are kept between its uses up to this size [B].
+SCAN_Q_CACHE_BYTES = 16 * 2**20
+
+#: Samples per block of the batched period scan (memory ~ periods x block x 8 B per array).
+SCAN_BLOCK_SAMPLES = 4096
+
+#: At most this many training samples enter the period scan (every k-th): the shortest period
+#: scanned (1,200 s) then still has ~100 samples per cycle on a day at 1 Hz, and the scan costs
+#: the same beyond. The regressors of the periods found use every sample.
+SCAN_MAX_SAMPLES = 5_000
+
+
+def _rotation_columns(data: DiagnosisData, index: Index | None = None) -> FloatArray:
+    """e_k x B (k = x, y, z): field change of a small rotation about body axis k, (N, 3, 3)
+    (of the samples ``index`` only, if given)."""
+    b = data.b_ref_body_nt if index is None else data.b_ref_body_nt[index]
+    return np.stack([np.cross(np.eye(3)[k], b) for k in range(3)], axis=2)
+
+
+def design_attitude(
+    data: DiagnosisData, train: BoolArray, *, fixed: Sequence[DesignBlock] = ()
+) -> DesignBlock | None:
+    # A slowly varying small rotation dtheta(t) of the attitude: db = dtheta x B. The constant part
+    # is a misalignment the 12 parameters absorb; the variation is a few sinusoids (thermal
+    # distortion, star-tracker errors) whose periods are found by a matching-pursuit scan of the
+    # training residual (periods shorter than 80 % of the training span). Beside effects already
+    # selected (``fixed``), their regressors are projected out with the calibration's: each
+    # period's gain is then what it adds to a joint fit of them all.
+    t = data.t_utc_s - float(data.t_utc_s[train][0])
+    span = float(t[train][-1]) if np.any(train) else 0.0
+    periods = ATTITUDE_PERIODS_S[0.8 * span > ATTITUDE_PERIODS_S]
+    if periods.size == 0:
+        return None
+    scan = AttitudeScan(data, train, fixed)
+    # The scan needs, per period, only 6 x 6 and 6 x q sums over the samples: the gain of the
+    # projected columns P[R c, R s] (P = I - QQ^T, R = rotation columns, c, s = cos, sin) is
+    # g^T (G + eps tr(G) I)^-1 g with G = A - B^T B, A = [[sum c^2 M, sum cs M], [., sum s^2 M]],
+    # M = R^T R, B = [sum c K, sum s K], K = Q^T R per sample, g = [sum c R^T r, sum s R^T r].
+    # All periods of a grid are summed at once, a block of samples at a time. Q (the calibration
+    # columns and the sinusoids of the periods kept) is never held whole: it is X R^-1, the
+    # columns X built per block and R from a block-updated QR (:class:`AttitudeScan`).
+
+    def first_best(periods_s: FloatArray, g: FloatArray, floor: float) -> tuple[float, float]:
+        # the first period whose gain is the largest, if it beats ``floor`` (a sequential scan
+        # keeping strictly better gains picks the same one)
+        if g.size == 0:
+            return floor, 0.0
+        i = int(np.argmax(g))
+        if not g[i] > floor:
+            return floor, 0.0
+        return float(g[i]), float(periods_s[i])
+
+    def peaks(periods_s: FloatArray, g: FloatArray, n: int) -> list[float]:
+        # the ``n`` largest local maxima of the gain over the grid, at least 5 % apart
+        order = np.argsort(-g, kind="stable")
+        out: list[float] = []
+        for i in order:
+            if len(out) == n or not g[i] > 0.0:
+                break
+            p = float(periods_s[i])
+            left = g[i - 1] if i > 0 else -np.inf
+            right = g[i + 1] if i + 1 < g.size else -np.inf
+            if g[i] >= left and g[i] >= right and all(abs(p / q - 1.0) >= 0.05 for q in out):
+                out.append(p)
+        return out
+
+    def refine(chosen: list[float], passes: int) -> tuple[list[float], float]:
+        # Cyclic refinement: re-fit each period with the others fixed (close periods that one
+        # training span cannot resolve at once are separated this way), until a pass changes
+        # none; returns the periods and their training residual sum of squares.
+        chosen = list(chosen)
+        for _ in range(passes):
+            before = list(chosen)
+            for j in range(len(chosen)):
+                basis = scan.basis(chosen[:j] + chosen[j + 1 :])
+                r_now = scan.residual(basis)
+                grid = chosen[j] * np.linspace(0.94, 1.06, 61)
+                _, p_best = first_best(grid, scan.gains(grid, r_now, basis), -1.0)
+                chosen[j] = p_best if p_best else chosen[j]
+            if chosen == before:
+                break
+        r_end = scan.residual(scan.basis(chosen))
+        return chosen, float(r_end @ r_end)
+
+    # Beam search over the greedy steps: the best ``ATTITUDE_BEAM`` sets of periods are carried
+    # from step to step (each extended by the best peaks of its gain curve), so that a first
+    # period that a greedy scan would take from a mixture of several sinusoids cannot lock the
+    # others out; the set with the smallest training residual after refinement wins.
+    beams: list[tuple[float, list[float]]] = [(0.0, [])]
+    for _ in range(ATTITUDE_MAX_TERMS):
+        grown: list[tuple[float, list[float]]] = []
+        for _score, chosen in beams:
+            basis = scan.basis(chosen)
+            r_now = scan.residual(basis)
+            rss_now = float(r_now @ r_now)
+            free = np.array(
+                [not any(abs(float(p) / c - 1.0) < 0.05 for c in chosen) for p in periods], bool
+            )
+            for start in peaks(
+                periods[free], scan.gains(periods[free], r_now, basis), ATTITUDE_BEAM
+            ):
+                # Refine the period on a fine grid (+-2.5 %): phase errors grow over the
+                # held-out span.
+                fine = start * np.linspace(0.975, 1.025, 51)
+                g_fine = scan.gains(fine, r_now, basis)
+                i = int(np.argmax(g_fine))
+                period, gain = float(fine[i]), float(g_fine[i])
+                key = sorted([*chosen, period])
+                if any(
+                    all(abs(a / b - 1.0) < 0.01 for a, b in zip(key, sorted(c), strict=True))
+                    for _, c in grown
+                ):
+                    continue
+                grown.append((rss_now - gain, [*chosen, period]))
+        if not grown:
+            break
+        grown.sort(key=lambda t: t[0])
+        beams = grown[:ATTITUDE_BEAM]
+    if not beams[0][1]:
+        return None
+    # one refinement pass for every set, then the best set refined to convergence
+    first = [refine(chosen, 1) for _, chosen in beams]
+    chosen = refine(min(first, key=lambda t: t[1])[0], ATTITUDE_REFINE_PASSES - 1)[0]
+    names = [
+        f"dtheta_{axis}_{fname}_{period:.0f}s_mrad"
+        for period in chosen
+        for fname in ("cos", "sin")
+        for axis in "xyz"
+    ]
+    fn = partial(_attitude_columns, data, float(data.t_utc_s[train][0]), tuple(chosen))
+    return DesignBlock(
+        FunctionColumns(data.n, len(names), fn),
+        names,
+        variant="periods_s=" + ",".join(f"{p:.0f}" for p in chosen),
+    )
+
+
+#: Samples per run of the factored sinusoids in :func:`_cos_sin`.
+_TRIG_RUN = 64
+
+
+def _cos_sin(w_rad_s: FloatArray, t_s: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """``cos(w t)`` and ``sin(w t)``, (periods, samples).
+
+    On evenly spaced samples ``t = t_j + k dt`` (runs of :data:`_TRIG_RUN`) the exponential
+    factors as ``exp(i w t_j) exp(i w k dt)``: one complex exponential per run and per offset
+    instead of two per sample, three times faster and equal to ~4e-15 (a product of two
+    rounded unit phasors); uneven times are evaluated directly.
+    """
+    m = t_s.shape[0]
+    runs = m // _TRIG_RUN
+    if runs >= 2 and m == runs * _TRIG_RUN:
+        dt = float(t_s[1] - t_s[0])
+        offsets = dt * np.arange(_TRIG_RUN)
+        starts = t_s[::_TRIG_RUN]
+        if dt > 0.0 and np.array_equal(t_s, (starts[:, None] + offsets[None, :]).reshape(-1)):
+            z = (
+                np.exp(1j * np.outer(w_rad_s, starts))[:, :, None]
+                * np.exp(1j * np.outer(w_rad_s, offsets))[:, None, :]
+            ).reshape(w_rad_s.shape[0], m)
+            return np.ascontiguousarray(z.real), np.ascontiguousarray(z.imag)
+    phase = np.outer(w_rad_s, t_s)
+    return np.cos(phase), np.sin(phase)
+
+
+class AttitudeScan:
+    """The training samples of the attitude period scan, read a block at a time.
+
+    A *basis* is the periods kept with ``M`` for the columns ``X`` = (12 calibration columns, the
+    regressors of ``fixed``, then cos and sin of each period times the rotation columns):
+    ``Q = X M`` is orthonormal and spans what the scan projects out (``M = R^-1`` of ``X = Q R``,
+    or its pseudo-inverse when fixed regressors repeat the calibration's); its rows are built per
+    block of samples.
+    """
+
+    def __init__(
+        self, data: DiagnosisData, train: BoolArray, fixed: Sequence[DesignBlock] = ()
+    ) -> None:
+        self.data = data
+        self.fixed = list(fixed)
+        idx = np.flatnonzero(train)
+        self.idx = idx[:: max(1, -(-idx.size // SCAN_MAX_SAMPLES))]
+        self.t = data.t_utc_s[self.idx] - float(data.t_utc_s[self.idx[0]])
+        self.y = data.b_raw_nt[self.idx].reshape(-1)
+        self.n = int(self.idx.size)
+        # Per block, what no period changes: the rotation columns, their products R^T R and the
+        # columns of the calibration and of ``fixed`` (at most SCAN_MAX_SAMPLES samples:
+        # ~0.4 MB each for the first two, 0.1 MB per column for the last).
+        self._q_of: FloatArray | None = None
+        self._q: dict[int, FloatArray] = {}
+        self._rot = [_rotation_columns(data, self.idx[a0:a1]) * 1e-3 for a0, a1 in self.blocks()]
+        self._rtr = [np.matmul(np.swapaxes(r, 1, 2), r).reshape(-1, 9) for r in self._rot]
+        self._base = [
+            np.concatenate(
+                [data.calibration_rows(self.idx[a0:a1])]
+                + [bl.rows(self.idx[a0:a1]).reshape(-1, bl.width) for bl in self.fixed],
+                axis=1,
+            )
+            for a0, a1 in self.blocks()
+        ]
+
+    def blocks(self) -> list[tuple[int, int]]:
+        return [
+            (a, min(a + SCAN_BLOCK_SAMPLES, self.n)) for a in range(0, self.n, SCAN_BLOCK_SAMPLES)
+        ]
+
+    def rot(self, a0: int, a1: int) -> FloatArray:
+        """Rotation columns per mrad of the block, (m, 3, 3)."""
+        return self._rot[a0 // SCAN_BLOCK_SAMPLES]
+
+    def columns(self, periods: Sequence[float], a0: int, a1: int) -> FloatArray:
+        """The columns X of the block, (3 m, 12 + fixed + 6 len(periods))."""
+        parts = [self._base[a0 // SCAN_BLOCK_SAMPLES]]
+        if periods:
+            rt, tt = self.rot(a0, a1), self.t[a0:a1]
+            for period in periods:
+                w = 2 * np.pi / period
+                cols = np.concatenate(
+                    [rt * np.cos(w * tt)[:, None, None], rt * np.sin(w * tt)[:, None, None]],
+                    axis=2,
+                )
+                parts.append(cols.reshape(-1, 6))
+        return np.concatenate(parts, axis=1)
+
+    def basis(self, periods: Sequence[float]) -> tuple[tuple[float, ...], FloatArray]:
+        """The periods and ``R^-1`` of their columns (block-updated QR)."""
+        width = 12 + sum(bl.width for bl in self.fixed) + 6 * len(periods)
+        r = triangular_factor((self.columns(periods, a0, a1) for a0, a1 in self.blocks()), width)
+        if not self.fixed:
+            return tuple(periods), np.asarray(np.linalg.inv(r))
+        # X = Q R = Q U S V': X V S^-1 = Q U, orthonormal on the directions S does not cut.
+        _, s, vt = np.linalg.svd(r)
+        keep = s > 1e-10 * s[0]
+        return tuple(periods), np.asarray(vt[keep].T / s[keep])
+
+    def q_rows(self, basis: tuple[tuple[float, ...], FloatArray], a0: int, a1: int) -> FloatArray:
+        """Rows of ``Q`` of the block; those of the latest basis are kept when they are small
+        (its residual and gains read them three times)."""
+        if self._q_of is not basis[1]:
+            self._q_of, self._q = basis[1], {}
+        q = self._q.get(a0)
+        if q is None:
+            q = np.asarray(self.columns(basis[0], a0, a1) @ basis[1])
+            if 3 * self.n * basis[1].shape[1] * 8 <= SCAN_Q_CACHE_BYTES:
+                self._q[a0] = q
+        return q
+
+    def residual(self, basis: tuple[tuple[float, ...], FloatArray]) -> FloatArray:
+        """``y - Q Q^T y`` over the training rows, (3 n,)."""
+        qty = np.zeros(basis[1].shape[1])
+        for a0, a1 in self.blocks():
+            qty += self.q_rows(basis, a0, a1).T @ self.y[3 * a0 : 3 * a1]
+        out = np.empty_like(self.y)
+        for a0, a1 in self.blocks():
+            rows = slice(3 * a0, 3 * a1)
+            out[rows] = self.y[rows] - self.q_rows(basis, a0, a1) @ qty
+        return out
+
+    def gains(
+        self,
+        periods_s: FloatArray,
+        r_now: FloatArray,
+        basis: tuple[tuple[float, ...], FloatArray],
+    ) -> FloatArray:
+        """Gain in fit of the 6 columns of each period, projected off the basis."""
+        n_q = basis[1].shape[1]
+        w = 2 * np.pi / np.asarray(periods_s, dtype=np.float64)
+        p_n = w.size
+        acc_m = np.zeros((3, p_n, 9))
+        acc_k = np.zeros((2, p_n, 3 * n_q))
+        acc_v = np.zeros((2, p_n, 3))
+        for a0, a1 in self.blocks():
+            m = a1 - a0
+            rt = self.rot(a0, a1)
+            q3 = self.q_rows(basis, a0, a1).reshape(m, 3, n_q)
+            m_blk = self._rtr[a0 // SCAN_BLOCK_SAMPLES]
+            k_blk = q3[:, 0, :, None] * rt[:, 0, None, :]  # K = Q^T R per sample
+            for i in (1, 2):
+                k_blk += q3[:, i, :, None] * rt[:, i, None, :]
+            k_blk = k_blk.reshape(m, -1)
+            v_blk = np.matmul(r_now[3 * a0 : 3 * a1].reshape(m, 1, 3), rt)[:, 0, :]
+            c, s_ = _cos_sin(w, self.t[a0:a1])
+            acc_m[0] += (c * c) @ m_blk
+            acc_m[1] += (c * s_) @ m_blk
+            acc_m[2] += (s_ * s_) @ m_blk
+            acc_k[0] += c @ k_blk
+            acc_k[1] += s_ @ k_blk
+            acc_v[0] += c @ v_blk
+            acc_v[1] += s_ @ v_blk
+        m3 = acc_m.reshape(3, p_n, 3, 3)
+        gram = np.empty((p_n, 6, 6))
+        gram[:, :3, :3] = m3[0]
+        gram[:, :3, 3:] = m3[1]
+        gram[:, 3:, :3] = np.swapaxes(m3[1], 1, 2)
+        gram[:, 3:, 3:] = m3[2]
+        # B = Q^T [R c, R s]: (p, q, 6), columns in the order (cos x,y,z, sin x,y,z)
+        bq = np.concatenate([acc_k[0].reshape(p_n, n_q, 3), acc_k[1].reshape(p_n, n_q, 3)], axis=2)
+        gram -= np.einsum("pqa,pqb->pab", bq, bq)
+        rhs = np.concatenate([acc_v[0], acc_v[1]], axis=1)
+        tr = np.trace(gram, axis1=1, axis2=2)
+        reg = gram + 1e-9 * tr[:, None, None] * np.eye(6)
+        out = np.zeros(p_n)
+        try:
+            sol = np.linalg.solve(reg, rhs[:, :, None])[:, :, 0]
+            out = np.einsum("pa,pa->p", rhs, sol)
+        except np.linalg.LinAlgError:
+            for i in range(p_n):
+                with contextlib.suppress(np.linalg.LinAlgError):
+                    out[i] = float(rhs[i] @ np.linalg.solve(reg[i], rhs[i]))
+        return np.asarray(out)
+
+
+def _attitude_columns(
+    data: DiagnosisData, t0_s: float, periods_s: tuple[float, ...], index: Index
+) -> FloatArray:
+    """The attitude-error regressors of the periods kept at the samples ``index``, (m, 3,
+    6 x periods): built when a fit asks for them instead of held for the whole attribution."""
+    t = data.t_utc_s[index] - t0_s
+    rot = _rotation_columns(data, index) * 1e-3  # per mrad
+    g = np.empty((t.shape[0], 3, 6 * len(periods_s)))
+    col = 0
+    for period in periods_s:
+        w = 2 * np.pi / period
+        for f in (np.cos(w * t), np.sin(w * t)):
+            for k in range(3):
+                np.multiply(rot[:, :, k], f[:, None], out=g[:, :, col])
+                col += 1
+    return g

@@ -1,0 +1,453 @@
+"""The joint fit: the 12 calibration parameters and the effects' parameters, on the training blocks.
+
+Iteratively reweighted least squares (Huber, then Tukey's bisquare; sigma from the median
+absolute deviation) with each effect's prior and bounds; the time blocks that split training from
+held-out data; the training BIC that picks an effect's variant.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from orbitcal.arrays import BoolArray, FloatArray, IntArray
+from orbitcal.diagnose.blocked import BlockedDesign
+from orbitcal.diagnose.bounds import consistency_reasons, param_range
+from orbitcal.diagnose.effects import (
+    FIELD_SCALE_NT,
+    DesignBlock,
+    DiagnosisData,
+)
+from orbitcal.diagnose.options import HOLDOUT_BLOCKS, N_BLOCKS
+from orbitcal.diagnose.prior import CalibrationPrior
+
+
+def time_blocks(
+    t_utc_s: FloatArray, *, n_blocks: int = N_BLOCKS, holdout_blocks: int = HOLDOUT_BLOCKS
+) -> tuple[BoolArray, BoolArray, npt.NDArray[np.intp]]:
+    """Cut the time span into equal-duration blocks; the last ``holdout_blocks`` are held out.
+
+    Returns
+    -------
+    train : ndarray of bool, shape (N,)
+    holdout : ndarray of bool, shape (N,)
+    block : ndarray of int, shape (N,)
+        Block index 0 .. n_blocks-1 of every sample.
+    """
+    t = np.asarray(t_utc_s, dtype=float)
+    span = float(t[-1] - t[0]) or 1.0
+    block = np.minimum(((t - t[0]) / span * n_blocks).astype(np.intp), n_blocks - 1)
+    holdout = block >= n_blocks - holdout_blocks
+    return ~holdout, holdout, block
+
+
+@dataclass(frozen=True)
+class JointFit:
+    """A joint fit of the 12-parameter calibration and some effects.
+
+    Attributes
+    ----------
+    a : ndarray, shape (3, 3)
+        ``b_raw = a @ b_ref + o + ...`` [-].
+    o_nt : ndarray, shape (3,)
+        Offsets [nT].
+    blocks : list of DesignBlock
+        The effect design blocks, in order.
+    coef : list of ndarray
+        Effect parameters per block, in the block's parameter units.
+    sigma_nt : float
+        Robust scale of the training residual per component [nT].
+    cov_cal : ndarray, shape (12, 12)
+        Covariance of ``(a.ravel(), o)`` from the fit, assuming white residuals.
+    coef_cov : list of ndarray
+        Covariance of each block's parameters (white residuals, as ``cov_cal``).
+    bounded : bool
+        Whether the effect parameters were kept inside their physical ranges.
+    train_rss_nt2 : float
+        Sum of the squared (unweighted) residual over the fitted samples [nT^2].
+    """
+
+    a: FloatArray
+    o_nt: FloatArray
+    blocks: list[DesignBlock]
+    coef: list[FloatArray]
+    sigma_nt: float
+    cov_cal: FloatArray
+    coef_cov: list[FloatArray] = field(default_factory=list)
+    bounded: bool = True
+    train_rss_nt2: float = float("nan")
+
+    def at_bounds(self, k: int, *, rel_tol: float = 1e-4) -> list[str]:
+        """Names of block ``k``'s parameters that sit on the edge of their physical range."""
+        out = []
+        for name, v in zip(self.blocks[k].names, self.coef[k], strict=True):
+            rng = param_range(name)
+            for edge in (rng.lower, rng.upper):
+                if np.isfinite(edge) and abs(float(v) - edge) <= rel_tol * max(abs(edge), 1.0):
+                    out.append(name)
+        return out
+
+    def effect_nt(self, k: int) -> FloatArray:
+        """The field block ``k`` adds at every sample [nT], shape (N, 3)."""
+        return self.blocks[k].apply(self.coef[k])
+
+    def predict_nt(self, data: DiagnosisData) -> FloatArray:
+        """Modelled raw measurement for all samples of ``data`` (the fitted sample set) [nT]."""
+        pred = data.b_ref_body_nt @ self.a.T + self.o_nt
+        for k in range(len(self.blocks)):
+            pred = pred + self.effect_nt(k)
+        return np.asarray(pred)
+
+
+def fit_joint(
+    data: DiagnosisData,
+    fit_mask: BoolArray,
+    blocks: Sequence[DesignBlock] = (),
+    *,
+    robust: bool = True,
+    iterations: int = 6,
+    ridge_effects: float = 1e-5,
+    huber_steps: int = 6,
+    use_prior: bool = True,
+    bounded: bool = True,
+    weights: FloatArray | None = None,
+    tol_sd: float = 1e-2,
+) -> JointFit:
+    """Fit the 12 calibration parameters and the effect parameters on the samples ``fit_mask``.
+
+    Parameters
+    ----------
+    data : DiagnosisData
+        All samples; ``blocks`` must be built on the same samples.
+    fit_mask : ndarray of bool, shape (N,)
+        Samples the fit may see.
+    blocks : sequence of DesignBlock
+        Effect regressors.
+    robust : bool
+        Iteratively reweighted: two Huber steps (k = 2.5 sigma) then Tukey's bisquare
+        (c = 4.685 sigma, sigma from the median absolute deviation), so samples of a localised
+        disturbance (an auroral crossing) drop out of the calibration; else plain least squares.
+    iterations : int
+        Reweighting iterations.
+    ridge_effects : float
+        Ridge on the unit-scaled effect columns, relative to the number of rows [-].
+    huber_steps : int
+        Huber iterations before switching to Tukey's bisquare (default: Huber only; the bisquare
+        is for data with a localised disturbance far above the noise, e.g. a storm pass).
+    use_prior : bool
+        Apply ``data.calibration_prior`` (if any) to the 12 calibration parameters; split fits,
+        which ask what the free parameters absorb, turn it off.
+    bounded : bool
+        Keep every effect parameter inside its physical range
+        (:func:`orbitcal.diagnose.bounds.param_range`): box-constrained least squares on the
+        normal equations of each reweighting step. False fits them freely (to tell whether a
+        candidate only wins by leaving its range).
+    weights : ndarray, shape (N, 3), optional
+        Starting weight of each sample's three rows (default 1): with ``robust`` False, a
+        weighted least-squares fit with these fixed weights (e.g. the robust weights of a
+        simpler model, to screen many models at the cost of one pass each).
+    tol_sd : float
+        The reweighting stops early once no parameter moved by more than ``tol_sd`` of its
+        standard error in the last step (in the last phase: Huber, or bisquare after at least
+        two bisquare-weighted solves). Huber reweighting converges linearly, by a factor of
+        ~0.01 per step on the day world of ``benchmarks/diagnose_timing.py``, so the parameters
+        are then within ~1e-4 standard errors of the converged ones.
+    """
+    design = BlockedDesign(data, blocks)
+    scale = design.scale
+    p = design.p
+    index = np.flatnonzero(fit_mask)
+    n_rows = 3 * index.size
+    y = data.b_raw_nt[index].reshape(-1)
+    w = np.ones_like(y) if weights is None else np.asarray(weights[index], dtype=float).reshape(-1)
+    theta = np.zeros(p)
+    sigma = 1.0
+    normal = np.eye(p)
+    # A light ridge on the effect columns (unit-scaled, 1e-5 of their mean square) keeps nearly
+    # collinear regressors (e.g. a current bump sampled at only two local times) from exploding;
+    # the 12 calibration columns are left free.
+    ridge = np.diag(np.r_[np.full(12, 1e-10), np.full(p - 12, ridge_effects)])
+    prior = data.calibration_prior if use_prior else None
+    prior_precision = np.zeros(p)
+    prior_mean = np.zeros(p)
+    plain_noise: float | None = None  # the noise of the same model by plain least squares
+
+    def noise_of_plain_fit() -> float:
+        nonlocal plain_noise
+        if plain_noise is None:
+            theta0 = _plain_least_squares(design, index, y)
+            plain_noise = _robust_sigma(design.residual(index, y, theta0))
+        return plain_noise
+
+    if prior is not None:
+        prior_mean[:12], prior_precision[:12] = _calibration_prior_terms(prior, scale)
+        # The data term is unweighted by the noise, so the prior is scaled by the noise variance:
+        # that of the same model fitted without the prior when the rows allow it (else of the
+        # prior calibration itself), fixed, so that a prior at odds with the data cannot inflate
+        # its own weight through the residual.
+        if n_rows > 2 * p + 30:
+            noise = noise_of_plain_fit()
+        else:
+            theta_prior = np.r_[prior_mean[:12], np.zeros(p - 12)]
+            noise = _robust_sigma(design.residual(index, y, theta_prior))
+        prior_precision *= noise**2
+    lo_s, hi_s = _scaled_bounds(blocks, scale) if bounded else (None, None)
+    if bounded:
+        # Gaussian priors of parameters with a published value (bounds.ParamRange.prior_*),
+        # weighted by the noise of a fit without them (fixed, as for the calibration prior).
+        pm, pp = _effect_priors(blocks, scale)
+        if np.any(pp > 0.0):
+            noise = noise_of_plain_fit()
+            prior_mean = np.where(pp > 0.0, pm, prior_mean)
+            prior_precision = prior_precision + pp * noise**2
+    theta_prev: FloatArray | None = None
+    r = y  # the residual of theta = 0, were there no iteration
+    for it in range(iterations if robust else 1):
+        # Normal equations accumulated a block of samples at a time (memory bounded by the
+        # block, not by the number of samples).
+        gram, rhs_data = design.normal_equations(index, y, w)
+        normal = gram + ridge * n_rows + np.diag(prior_precision)
+        rhs = rhs_data + prior_precision * prior_mean
+        try:
+            theta = np.linalg.solve(normal, rhs)
+        except np.linalg.LinAlgError:  # pragma: no cover - singular design
+            theta = design.lstsq(index, y, w)
+        if lo_s is not None and hi_s is not None and (np.any(theta < lo_s) or np.any(theta > hi_s)):
+            theta = _box_solve(normal, rhs, lo_s, hi_s, theta)
+        r = design.residual(index, y, theta)
+        sigma = _robust_sigma(r)
+        if not robust or it == iterations - 1:
+            break
+        last_phase = huber_steps >= iterations - 1 or it >= huber_steps + 2
+        if last_phase and theta_prev is not None:
+            sd = sigma * np.sqrt(np.abs(np.diag(np.linalg.pinv(normal))))
+            if np.all(np.abs(theta - theta_prev) <= tol_sd * np.maximum(sd, 1e-300)):
+                break
+        theta_prev = theta
+        w = _robust_weights(r, sigma, huber=it < huber_steps)
+    return _packed(blocks, scale, theta, normal, sigma, r, bounded=bounded)
+
+
+def _packed(
+    blocks: Sequence[DesignBlock],
+    scale: FloatArray,
+    theta: FloatArray,
+    normal: FloatArray,
+    sigma: float,
+    r: FloatArray,
+    *,
+    bounded: bool,
+) -> JointFit:
+    """The :class:`JointFit` of the scaled solution ``theta`` of the normal matrix ``normal``:
+    the parameters in physical units and their covariance (white noise of ``sigma``)."""
+    # Covariance of the calibration parameters (white-noise assumption; the split tests inflate it).
+    try:
+        cov_scaled = np.linalg.inv(normal) * sigma**2
+    except np.linalg.LinAlgError:  # pragma: no cover - singular design
+        cov_scaled = np.linalg.pinv(normal) * sigma**2
+    cov = cov_scaled / np.outer(scale, scale)
+    theta = theta / scale
+    a = theta[:9].reshape(3, 3) / FIELD_SCALE_NT
+    cov_cal = cov[:12, :12].copy()
+    cov_cal[:9, :] /= FIELD_SCALE_NT
+    cov_cal[:, :9] /= FIELD_SCALE_NT
+    coef = []
+    coef_cov = []
+    col = 12
+    for bl in blocks:
+        q = len(bl.names)
+        coef.append(theta[col : col + q])
+        coef_cov.append(cov[col : col + q, col : col + q].copy())
+        col += q
+    return JointFit(
+        a=a,
+        o_nt=theta[9:12],
+        blocks=list(blocks),
+        coef=coef,
+        sigma_nt=sigma,
+        cov_cal=cov_cal,
+        coef_cov=coef_cov,
+        bounded=bounded,
+        train_rss_nt2=float(r @ r),
+    )
+
+
+def _robust_weights(r: FloatArray, sigma: float, *, huber: bool) -> FloatArray:
+    """Reweighting step: Huber (k = 2.5 sigma) or Tukey's bisquare (c = 4.685 sigma)."""
+    if huber:
+        u = np.abs(r) / (2.5 * sigma)  # Huber, k = 2.5 sigma
+        return np.asarray(np.where(u <= 1.0, 1.0, 1.0 / np.maximum(u, 1e-12)))
+    u = np.abs(r) / (4.685 * sigma)  # Tukey bisquare, c = 4.685 sigma
+    return np.asarray(np.where(u < 1.0, (1.0 - u**2) ** 2, 0.0))
+
+
+def _robust_sigma(r: FloatArray) -> float:
+    """Noise level from the median absolute deviation (1.4826 MAD, Gaussian-consistent) [nT],
+    floored at 1e-6."""
+    return max(float(1.4826 * np.median(np.abs(r - np.median(r)))), 1e-6)
+
+
+def _calibration_prior_terms(
+    prior: CalibrationPrior, scale: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Mean and precision (before the noise variance) of the prior on the 12 unit-scaled
+    calibration parameters: theta_s = theta * scale, theta = (A * FIELD_SCALE_NT, o)."""
+    sd = np.r_[np.full(9, prior.sigma_a * FIELD_SCALE_NT), np.full(3, prior.sigma_o_nt)]
+    mean = np.r_[prior.a.ravel() * FIELD_SCALE_NT, prior.o_nt] * scale[:12]
+    return mean, 1.0 / (sd * scale[:12]) ** 2
+
+
+def _plain_least_squares(design: BlockedDesign, index: IntArray, y: FloatArray) -> FloatArray:
+    """Unweighted least-squares parameters from the normal equations (one pass over the rows).
+
+    Used for the residual that sets the noise level of the priors: the columns are unit-scaled,
+    and a direction the data leave open (cut at 1e-13 of the largest singular value) changes the
+    parameters, not the residual.
+    """
+    gram, rhs = design.normal_equations(index, y, np.ones_like(y))
+    return np.asarray(np.linalg.lstsq(gram, rhs, rcond=1e-13)[0], dtype=float)
+
+
+def _scaled_bounds(
+    blocks: Sequence[DesignBlock], scale: FloatArray
+) -> tuple[FloatArray | None, FloatArray | None]:
+    """Lower and upper bounds of the unit-scaled parameters (None when nothing is bounded)."""
+    lo = [np.full(12, -np.inf)]
+    hi = [np.full(12, np.inf)]
+    for bl in blocks:
+        ranges = [param_range(n) for n in bl.names]
+        lo.append(np.array([r.lower for r in ranges]))
+        hi.append(np.array([r.upper for r in ranges]))
+    lo_all, hi_all = np.concatenate(lo), np.concatenate(hi)
+    if not (np.any(np.isfinite(lo_all)) or np.any(np.isfinite(hi_all))):
+        return None, None
+    return lo_all * scale, hi_all * scale
+
+
+def _effect_priors(
+    blocks: Sequence[DesignBlock], scale: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Prior means and precisions of the unit-scaled parameters (precision 0: no prior)."""
+    mean = np.zeros(scale.size)
+    prec = np.zeros(scale.size)
+    col = 12
+    for bl in blocks:
+        for n in bl.names:
+            rng = param_range(n)
+            if rng.prior_mean is not None and rng.prior_sd:
+                mean[col] = rng.prior_mean * scale[col]
+                prec[col] = 1.0 / (rng.prior_sd * scale[col]) ** 2
+            col += 1
+    return mean, prec
+
+
+def _box_solve(
+    normal: FloatArray, rhs: FloatArray, lo: FloatArray, hi: FloatArray, start: FloatArray
+) -> FloatArray:
+    """``argmin 1/2 t' N t - rhs' t`` subject to ``lo <= t <= hi`` (bounded-variable LS).
+
+    With ``N = L L'`` the objective is ``1/2 |L' t - L^-1 rhs|^2`` up to a constant, a small
+    (p x p) problem for :func:`scipy.optimize.lsq_linear`.
+    """
+    from scipy.linalg import cho_factor, solve_triangular
+    from scipy.optimize import lsq_linear
+
+    try:
+        c, lower = cho_factor(normal, lower=True)
+    except np.linalg.LinAlgError:  # pragma: no cover - not positive definite
+        return np.clip(start, lo, hi)
+    l_mat = np.tril(c) if lower else np.triu(c).T
+    b = solve_triangular(l_mat, rhs, lower=True)
+    res = lsq_linear(l_mat.T, b, bounds=(lo, hi), method="bvls", tol=1e-12)
+    return np.asarray(res.x, dtype=float)
+
+
+def _train_bic(
+    data: DiagnosisData, train: BoolArray, blocks: Sequence[DesignBlock], *, bounded: bool = True
+) -> float:
+    """Bayesian information criterion of a plain least-squares fit on the training samples.
+
+    Infinite when the last block's parameters contradict each other (``consistency_reasons``).
+    """
+    fit = fit_joint(data, train, blocks, robust=False, bounded=bounded)
+    if blocks and _inconsistent(fit, len(blocks) - 1):
+        return float("inf")
+    n = 3 * int(train.sum())
+    k = 12 + sum(len(b.names) for b in blocks)
+    return float(n * np.log(max(fit.train_rss_nt2, 1e-300) / n) + k * np.log(n))
+
+
+def _bic(fit: JointFit, residual_nt: FloatArray, train: BoolArray, inflation: float = 1.0) -> float:
+    """BIC of a fit from its residual on the training samples.
+
+    ``inflation`` (>= 1) divides the number of residuals into an effective number of independent
+    ones (:func:`_autocorr_inflation`): with a misfit correlated over many samples, the count of
+    rows overstates the evidence of a lower residual and a flexible model wins on the training
+    blocks what it does not hold on the held-out ones.
+    """
+    n = 3 * int(train.sum())
+    n_eff = max(n / max(inflation, 1.0), 1.0)
+    rss = max(float(np.sum(residual_nt[train] ** 2)), 1e-300)
+    k = 12 + sum(len(b.names) for b in fit.blocks)
+    return float(n_eff * np.log(rss / n) + k * np.log(n_eff))
+
+
+def _resolve(
+    data: DiagnosisData,
+    train: BoolArray,
+    fixed: Sequence[DesignBlock],
+    block: DesignBlock,
+    *,
+    bounded: bool = True,
+) -> DesignBlock:
+    """Pick among a block's alternatives by the training BIC (never the held-out data).
+
+    A variant whose parameters contradict each other (e.g. a second-order time-shift term that
+    is not the square of the shift) is not chosen.
+    """
+    if not block.alternatives:
+        return block
+    # One alternative at a time: a lazily built one is dropped unless it is the best so far.
+    # The first lowest BIC wins (a NaN counts as lowest, as in numpy's argmin).
+    best, best_bic = block, _train_bic(data, train, [*fixed, block], bounded=bounded)
+    any_finite = bool(np.isfinite(best_bic))
+    for opt in block.alternatives:
+        bic = _train_bic(data, train, [*fixed, opt], bounded=bounded)
+        any_finite = any_finite or bool(np.isfinite(bic))
+        if bic < best_bic or (np.isnan(bic) and not np.isnan(best_bic)):
+            best, best_bic = opt, bic
+    # The chosen form refined (a step time between two of the grid's): its nearby forms, the
+    # best kept, until none refines further. A nearby form of the same variant is the chosen one
+    # with a finer refinement (no refit).
+    while any_finite and best.refine is not None:
+        moved, stay = best, None
+        for opt in best.refine():
+            if opt.variant == best.variant:
+                stay = opt
+                continue
+            bic = _train_bic(data, train, [*fixed, opt], bounded=bounded)
+            if bic < best_bic:
+                moved, best_bic = opt, bic
+        if moved is not best:
+            best = moved
+        elif stay is not None:
+            best = stay
+        else:
+            break
+    return best if any_finite else block
+
+
+def _sd(fit: JointFit, k: int) -> FloatArray:
+    """Standard deviations of block ``k``'s parameters (white residuals)."""
+    return np.sqrt(np.clip(np.diag(fit.coef_cov[k]), 0.0, None))
+
+
+def _inconsistent(fit: JointFit, k: int) -> bool:
+    return bool(
+        consistency_reasons(
+            fit.blocks[k].names, [float(v) for v in fit.coef[k]], [float(v) for v in _sd(fit, k)]
+        )
+    )

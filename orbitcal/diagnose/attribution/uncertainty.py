@@ -1,0 +1,157 @@
+"""Uncertainty of the selected model: parameter intervals, shrink intervals, verdict confidence,
+and how much of an effect's field the 12 calibration parameters could absorb.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from orbitcal.arrays import BoolArray, FloatArray
+from orbitcal.diagnose.attribution.joint_fit import JointFit, _sd
+from orbitcal.diagnose.bounds import param_range
+from orbitcal.diagnose.effects import (
+    FIELD_SCALE_NT,
+    DiagnosisData,
+)
+
+#: Two-sided 90 % quantile of the standard normal distribution.
+Z90 = 1.6448536269514722
+
+
+def _intervals(
+    fit: JointFit, k: int, residual_nt: FloatArray, train: BoolArray
+) -> dict[str, list[float]]:
+    """90 % intervals of block ``k``'s parameters, clipped to their physical ranges.
+
+    Fit covariance (robust weights, sigma from the MAD), its variance inflated by the
+    autocorrelation of the training residual (``1 + 2 sum rho_k``, the largest of the three
+    axes), so that a residual correlated over many samples does not pass for many independent
+    ones.
+    """
+    if k >= len(fit.coef_cov):
+        return {}
+    r = residual_nt[train]
+    infl = max(_autocorr_inflation(r[:, i]) for i in range(3))
+    sd = _sd(fit, k) * np.sqrt(infl)
+    out: dict[str, list[float]] = {}
+    for n, v, e in zip(fit.blocks[k].names, fit.coef[k], sd, strict=True):
+        rng = param_range(n)
+        out[n] = [max(float(v - Z90 * e), rng.lower), min(float(v + Z90 * e), rng.upper)]
+    return out
+
+
+def _chunk_sums(
+    r_nt: FloatArray, holdout: BoolArray, n_chunks: int
+) -> tuple[FloatArray, FloatArray]:
+    """Sum of |r|^2 and sample count per consecutive chunk of the held-out samples."""
+    e = np.sum(r_nt[holdout] ** 2, axis=1)
+    parts = [c for c in np.array_split(np.arange(e.size), n_chunks) if c.size]
+    return np.array([e[c].sum() for c in parts]), np.array([c.size for c in parts], dtype=float)
+
+
+#: Block-bootstrap resamples for the shrink intervals and the verdict confidence.
+N_BOOTSTRAP = 400
+
+
+def _shrink_interval(
+    r_before: FloatArray, r_after: FloatArray, holdout: BoolArray, n_chunks: int
+) -> tuple[float, float] | None:
+    """90 % interval of the held-out shrink: block bootstrap over the held-out chunks."""
+    eb, _ = _chunk_sums(r_before, holdout, n_chunks)
+    ea, _ = _chunk_sums(r_after, holdout, n_chunks)
+    if eb.size < 5:
+        return None
+    rng = np.random.default_rng(0)
+    idx = rng.integers(0, eb.size, size=(N_BOOTSTRAP, eb.size))
+    ratio = np.sqrt(eb[idx].sum(axis=1) / np.maximum(ea[idx].sum(axis=1), 1e-300))
+    lo, hi = np.percentile(ratio, [5.0, 95.0])
+    return float(lo), float(hi)
+
+
+def _verdict_confidence(
+    verdict: str,
+    twins: Sequence[str],
+    r_base: FloatArray,
+    residuals: dict[str, FloatArray],
+    holdout: BoolArray,
+    n_chunks: int,
+    min_gain: float,
+) -> float | None:
+    """Fraction of block-bootstrap resamples in which the first selection step names the verdict.
+
+    The held-out chunks are resampled with replacement; in each resample the candidate with the
+    lowest held-out mean square wins if it beats the calibration alone by ``min_gain`` in RMS,
+    else nothing does (``"none"``). Counted as agreeing: the verdict or a model listed as
+    indistinguishable from it.
+    """
+    eb, _ = _chunk_sums(r_base, holdout, n_chunks)
+    if eb.size < 5:
+        return None
+    names = list(residuals)
+    sums = np.array([_chunk_sums(residuals[n], holdout, n_chunks)[0] for n in names])
+    rng = np.random.default_rng(1)
+    idx = rng.integers(0, eb.size, size=(N_BOOTSTRAP, eb.size))
+    base_tot = eb[idx].sum(axis=1)
+    agree = 0
+    ok = {verdict, *twins}
+    if names:
+        tot = sums[:, idx].sum(axis=2)  # (candidates, resamples)
+        best = np.argmin(tot, axis=0)
+        wins = tot[best, np.arange(idx.shape[0])] < base_tot * (1.0 - min_gain) ** 2
+        for b, w in zip(best, wins, strict=True):
+            agree += int((names[int(b)] if w else "none") in ok)
+    else:
+        agree = N_BOOTSTRAP if verdict == "none" else 0
+    return agree / N_BOOTSTRAP
+
+
+@dataclass(frozen=True)
+class _CalibrationBasis:
+    """The 12 calibration columns ``X`` on the training rows with ``R^-1`` of ``X = Q R``:
+    ``Q^T f = R^-T X^T f`` without forming ``Q`` (3 n_train x 12)."""
+
+    b_scaled: FloatArray  # b_ref / FIELD_SCALE_NT on the training samples, (n_train, 3)
+    r_inv: FloatArray  # (12, 12)
+
+    def project(self, f: FloatArray) -> FloatArray:
+        """``Q^T f`` of a field on the training samples, ``f`` (n_train, 3) -> (12,)."""
+        xtf = np.concatenate([(self.b_scaled.T @ f).T.reshape(-1), f.sum(axis=0)])
+        return np.asarray(self.r_inv.T @ xtf)
+
+
+def _calibration_basis(data: DiagnosisData, train: BoolArray) -> _CalibrationBasis:
+    """The calibration's orthonormal basis on the training rows, in factored form."""
+    idx = np.flatnonzero(train)
+    return _CalibrationBasis(
+        data.b_ref_body_nt[idx] / FIELD_SCALE_NT, data.calibration_r_inv_of(idx)
+    )
+
+
+def _absorbed_fraction(
+    fit: JointFit, k: int, train: BoolArray, basis: _CalibrationBasis
+) -> float | None:
+    """Share of block ``k``'s fitted field (training energy) inside the calibration's span."""
+    f = fit.effect_nt(k)[train]
+    total = float(np.sum(f * f))
+    if total <= 0.0:
+        return None
+    proj = basis.project(f)
+    return float(proj @ proj) / total
+
+
+def _autocorr_inflation(r: FloatArray, max_lag: int = 200) -> float:
+    """Variance inflation of a mean for correlated residuals, 1 + 2 sum rho_k (Bartlett cut)."""
+    x = r - np.mean(r)
+    var = float(np.mean(x**2))
+    if var == 0.0 or x.size < 4:
+        return 1.0
+    total = 1.0
+    for k in range(1, min(max_lag, x.size // 4)):
+        rho = float(np.mean(x[:-k] * x[k:])) / var
+        if rho < 0.05:
+            break
+        total += 2.0 * rho
+    return total

@@ -1,0 +1,362 @@
+"""The diagnosis's arrays: :class:`DiagnosisData`, the samples and what is derived from them.
+
+Geometry helpers use the centred dipole of :mod:`orbitcal.geomag` (IGRF-14 at 2020.0), the same
+one the simulator uses.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+import numpy.typing as npt
+
+from orbitcal.arrays import BoolArray, FloatArray
+from orbitcal.diagnose.columns import (
+    Index,
+    chunk_slices,
+    triangular_factor,
+)
+from orbitcal.diagnose.prior import CalibrationPrior
+from orbitcal.diagnose.track import along_track
+from orbitcal.geomag import dipole_axis_itrs, magnetic_latitude_deg
+
+__all__ = ["FIELD_SCALE_NT", "SECONDS_PER_DAY", "DiagnosisData"]
+
+
+#: Earth rotation rate about the ITRS z axis [rad/s] (IERS nominal).
+EARTH_ROTATION_RAD_S = 7.292115e-5
+
+#: Field scale used to keep design columns near unit size [nT].
+FIELD_SCALE_NT = 5.0e4
+
+
+SECONDS_PER_DAY = 86400.0
+
+
+def _segments(t_s: FloatArray) -> list[slice]:
+    """Contiguous runs of samples (a gap longer than 3 median steps starts a new run)."""
+    if t_s.size < 2:
+        return [slice(0, t_s.size)]
+    dt = np.diff(t_s)
+    step = float(np.median(dt))
+    cuts = np.flatnonzero(dt > 3.0 * step) + 1
+    edges = [0, *cuts.tolist(), t_s.size]
+    return [slice(a, b) for a, b in itertools.pairwise(edges)]
+
+
+def _time_derivative(t_s: FloatArray, y: FloatArray) -> FloatArray:
+    """d y / d t per contiguous segment (second-order central differences) [unit of y / s]."""
+    out = np.zeros_like(y)
+    for seg in _segments(t_s):
+        n = seg.stop - seg.start
+        if n >= 3:
+            out[seg] = np.gradient(y[seg], t_s[seg], axis=0, edge_order=2)
+        elif n == 2:
+            out[seg] = (y[seg][1] - y[seg][0]) / (t_s[seg][1] - t_s[seg][0])
+    return out
+
+
+#: Largest time between the evaluations of the reference field's gradient along the track [s]
+#: (:attr:`DiagnosisData.db_ref_body_drtn_nt_km`); interpolated between them. The core field's
+#: gradient changes over thousands of km: at 10 s (76 km) the spline is exact to rounding.
+GRADIENT_KNOT_SPACING_S = 10.0
+
+
+@dataclass(frozen=True, eq=False)
+class DiagnosisData:
+    """Everything the attribution needs, as plain arrays (N samples, time-ordered).
+
+    Attributes
+    ----------
+    t_utc_s : ndarray, shape (N,)
+        Sample times, POSIX seconds of UTC [s].
+    b_raw_nt : ndarray, shape (N, 3)
+        Raw magnetometer output, sensor axes [nT].
+    b_ref_body_nt : ndarray, shape (N, 3)
+        Reference field (e.g. IGRF-14) at each sample, body frame [nT].
+    rot_itrs_to_body : ndarray, shape (N, 3, 3)
+        Rotation matrices with ``v_body = rot_itrs_to_body[n] @ v_itrs`` [-].
+    r_itrs_km : ndarray, shape (N, 3)
+        Positions, ITRS [km].
+    x_hk : ndarray, shape (N, k)
+        Housekeeping regressors (``temperature`` [degC], ``mtq_x..z`` [A m^2], ``hk_*``).
+    hk_names : tuple of str
+        Names of the ``x_hk`` columns.
+    sunlit : ndarray of bool, shape (N,), optional
+        True where the spacecraft is in sunlight.
+    sun_body : ndarray, shape (N, 3), optional
+        Unit vector towards the Sun, body frame [-].
+    rc_index_nt : ndarray, shape (N,), optional
+        Ring-current (RC) index interpolated at the sample times [nT].
+    b_crust_body_nt : ndarray, shape (N, 3), optional
+        A crustal field model at the samples, body frame [nT].
+    crust_model : str, optional
+        Name of that crustal model (e.g. ``"LCS-1"``).
+    reference_field : str
+        Name of the reference field with its generation (e.g. ``"IGRF-14"``).
+    illumination : ndarray, shape (N,), optional
+        Visible fraction of the solar disc, 0 (umbra) to 1 [-]; refines ``sunlit``.
+    b_ext_body_nt : ndarray, shape (N, 3), optional
+        An RC-index-driven magnetospheric field model (``orbitcal.field`` ``"RC"``), body frame
+        [nT].
+    calibration_prior : CalibrationPrior, optional
+        The calibration in service as a prior on the 12 parameters of every joint fit.
+    positions_measured : bool
+        True when positions come with the telemetry (GNSS, metre-level): orbit_error, which models
+        the along-track error of a propagated element set, is then no candidate.
+    reference_fn : callable, optional
+        ``reference_fn(t_utc_s, r_itrs_km) -> b_itrs_nt``: the reference field anywhere, for
+        gradients off the track; default the ``orbitcal.truth`` model named ``reference_field``.
+    """
+
+    t_utc_s: FloatArray
+    b_raw_nt: FloatArray
+    b_ref_body_nt: FloatArray
+    rot_itrs_to_body: FloatArray
+    r_itrs_km: FloatArray
+    x_hk: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
+    hk_names: tuple[str, ...] = ()
+    sunlit: BoolArray | None = None
+    sun_body: FloatArray | None = None
+    rc_index_nt: FloatArray | None = None
+    b_crust_body_nt: FloatArray | None = None
+    crust_model: str | None = None
+    reference_field: str = "IGRF-14"
+    illumination: FloatArray | None = None
+    b_ext_body_nt: FloatArray | None = None
+    calibration_prior: CalibrationPrior | None = None
+    positions_measured: bool = False
+    reference_fn: Callable[[FloatArray, FloatArray], FloatArray] | None = None
+
+    def __post_init__(self) -> None:
+        n = self.t_utc_s.shape[0]
+        if self.b_raw_nt.shape != (n, 3) or self.b_ref_body_nt.shape != (n, 3):
+            raise ValueError("b_raw_nt and b_ref_body_nt must have shape (N, 3)")
+        if self.rot_itrs_to_body.shape != (n, 3, 3) or self.r_itrs_km.shape != (n, 3):
+            raise ValueError("rot_itrs_to_body must be (N, 3, 3) and r_itrs_km (N, 3)")
+        if self.x_hk.size and self.x_hk.shape != (n, len(self.hk_names)):
+            raise ValueError("x_hk must have shape (N, len(hk_names))")
+        if np.any(np.diff(self.t_utc_s) <= 0):
+            raise ValueError("t_utc_s must be strictly increasing")
+
+    def calibration_rows(self, index: Index) -> FloatArray:
+        """The 12 calibration columns (``b_ref / FIELD_SCALE_NT`` per axis and an offset) of the
+        samples ``index``, rows sample-major, shape (3 m, 12)."""
+        b = self.b_ref_body_nt[index] / FIELD_SCALE_NT
+        x = np.zeros((b.shape[0], 3, 12))
+        for i in range(3):
+            x[:, i, 3 * i : 3 * i + 3] = b
+            x[:, i, 9 + i] = 1.0
+        return x.reshape(-1, 12)
+
+    def calibration_r_inv_of(self, index: npt.NDArray[np.intp]) -> FloatArray:
+        """Inverse ``R^-1`` (12, 12) of the triangular factor of the 12 calibration columns on
+        the samples ``index``, ``X = Q R``: an orthonormal basis of the calibration there is
+        ``X R^-1``, built a block of samples at a time (the whole 3N x 12 ``Q``, 288 B per
+        sample, is never held)."""
+        blocks = (self.calibration_rows(index[part]) for part in chunk_slices(index.size))
+        return np.asarray(np.linalg.inv(triangular_factor(blocks, 12)), dtype=np.float64)
+
+    @cached_property
+    def calibration_r_inv(self) -> FloatArray:
+        """:meth:`calibration_r_inv_of` all samples, computed once per data set."""
+        return self.calibration_r_inv_of(np.arange(self.n))
+
+    @property
+    def n(self) -> int:
+        """Number of samples."""
+        return int(self.t_utc_s.shape[0])
+
+    def subset(self, index: npt.NDArray[np.intp] | BoolArray | slice) -> DiagnosisData:
+        """The same data restricted to some samples (order kept)."""
+
+        def pick(a: FloatArray | BoolArray | None) -> FloatArray | BoolArray | None:
+            return None if a is None else a[index]
+
+        return DiagnosisData(
+            t_utc_s=self.t_utc_s[index],
+            b_raw_nt=self.b_raw_nt[index],
+            b_ref_body_nt=self.b_ref_body_nt[index],
+            rot_itrs_to_body=self.rot_itrs_to_body[index],
+            r_itrs_km=self.r_itrs_km[index],
+            x_hk=self.x_hk[index] if self.x_hk.size else self.x_hk,
+            hk_names=self.hk_names,
+            sunlit=pick(self.sunlit),  # type: ignore[arg-type]
+            sun_body=pick(self.sun_body),  # type: ignore[arg-type]
+            rc_index_nt=pick(self.rc_index_nt),  # type: ignore[arg-type]
+            b_crust_body_nt=pick(self.b_crust_body_nt),  # type: ignore[arg-type]
+            crust_model=self.crust_model,
+            reference_field=self.reference_field,
+            illumination=pick(self.illumination),  # type: ignore[arg-type]
+            b_ext_body_nt=pick(self.b_ext_body_nt),  # type: ignore[arg-type]
+            calibration_prior=self.calibration_prior,
+            positions_measured=self.positions_measured,
+            reference_fn=self.reference_fn,
+        )
+
+    def hk(self, name: str) -> FloatArray | None:
+        """The housekeeping column ``name`` or None."""
+        if name in self.hk_names and self.x_hk.size:
+            return self.x_hk[:, self.hk_names.index(name)]
+        return None
+
+    # Derived geometry, computed once.
+    @cached_property
+    def b_ref_itrs_nt(self) -> FloatArray:
+        """Reference field, ITRS [nT]."""
+        return np.einsum("nji,nj->ni", self.rot_itrs_to_body, self.b_ref_body_nt)
+
+    @cached_property
+    def body_rate_itrs_rad_s(self) -> FloatArray:
+        """Angular velocity of the body relative to ITRS, body axes [rad/s], shape (N, 3).
+
+        From the rotation between the neighbouring samples (log map, central where possible), so a
+        fast, steady spin is differentiated exactly rather than by chords.
+        """
+        from scipy.spatial.transform import Rotation
+
+        r = self.rot_itrs_to_body
+        t = self.t_utc_s
+        out = np.zeros((self.n, 3))
+        for seg in _segments(t):
+            idx = np.arange(seg.start, seg.stop)
+            if idx.size < 2:
+                continue
+            lo = np.concatenate([idx[:1], idx[:-2], idx[-2:-1]])
+            hi = np.concatenate([idx[1:2], idx[2:], idx[-1:]])
+            rel = np.einsum("nij,nkj->nik", r[hi], r[lo])  # R(hi) R(lo)^T, body axes
+            rotvec = Rotation.from_matrix(rel).as_rotvec()
+            out[idx] = rotvec / (t[hi] - t[lo])[:, None]
+        return out
+
+    @cached_property
+    def db_ref_body_dt_nt_s(self) -> FloatArray:
+        """Time derivative of the reference field seen in the body frame [nT/s].
+
+        ``d(R b_itrs)/dt = w x (R b_itrs) + R d(b_itrs)/dt`` with the body rate ``w`` from the
+        attitude (exact for a steady spin) and the Earth-fixed field differenced along the track.
+        """
+        db_itrs = _time_derivative(self.t_utc_s, self.b_ref_itrs_nt)
+        return np.asarray(
+            np.cross(self.body_rate_itrs_rad_s, self.b_ref_body_nt)
+            + np.einsum("nij,nj->ni", self.rot_itrs_to_body, db_itrs)
+        )
+
+    @cached_property
+    def db_ref_body_drtn_nt_km(self) -> FloatArray:
+        """Gradients of the reference field along radial, along-track, cross-track [nT/km].
+
+        Shape (N, 3, 3): ``[:, :, k]`` is the body-frame field change per km of displacement along
+        the k-th of (radial, inertial along-track, orbit normal). An element set that is late or
+        early puts the spacecraft elsewhere in its orbit at the same time: the displacement is
+        along the inertial velocity, while the Earth stays where it is. A time-tag error instead
+        moves the sample along the velocity relative to the Earth; the two differ by the Earth's
+        rotation (0.46 km/s x cos(latitude) of 7.6 km/s, mostly across track), and after the 12
+        parameters absorb the attitude term of a steady spin, that difference is all that tells
+        the two effects apart. Central differences of the reference field (``reference_fn``, else
+        the model named ``reference_field``) over +-5 km, rotated into the body frame.
+        """
+        field_fn = self.reference_fn
+        if field_fn is None:
+            from orbitcal.truth import reference_field_itrs_nt
+
+            name = self.reference_field
+
+            def field_fn(t: FloatArray, r: FloatArray) -> FloatArray:
+                return np.asarray(reference_field_itrs_nt(t, r, field=name))
+
+        r = self.r_itrs_km
+        omega = np.array([0.0, 0.0, EARTH_ROTATION_RAD_S])
+        v_in = _time_derivative(self.t_utc_s, r) + np.cross(omega, r)
+        radial = r / np.linalg.norm(r, axis=1, keepdims=True)
+        normal = np.cross(radial, v_in)
+        normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
+        along = np.cross(normal, radial)
+        h_km = 5.0
+
+        def gradient_itrs(t: FloatArray, r_and_dirs: FloatArray) -> FloatArray:
+            pos, dirs = r_and_dirs[:, :3], r_and_dirs[:, 3:].reshape(-1, 3, 3)
+            out = np.empty((t.shape[0], 3, 3))
+            for k in range(3):
+                plus = np.asarray(field_fn(t, pos + h_km * dirs[:, k]))
+                minus = np.asarray(field_fn(t, pos - h_km * dirs[:, k]))
+                out[:, :, k] = (plus - minus) / (2.0 * h_km)
+            return out
+
+        # Evaluated every GRADIENT_KNOT_SPACING_S along the track and interpolated.
+        grad = along_track(
+            gradient_itrs,
+            self.t_utc_s,
+            np.column_stack([r, radial, along, normal]),
+            GRADIENT_KNOT_SPACING_S,
+        )
+        out = np.empty((self.n, 3, 3))
+        for k in range(3):
+            out[:, :, k] = np.einsum("nij,nj->ni", self.rot_itrs_to_body, grad[:, :, k])
+        return out
+
+    @cached_property
+    def dipole_axis_body(self) -> FloatArray:
+        """The dipole axis (SM z) in the body frame, per sample [-]."""
+        return np.einsum("nij,j->ni", self.rot_itrs_to_body, dipole_axis_itrs())
+
+    @cached_property
+    def mlat_deg(self) -> FloatArray:
+        """Centred-dipole magnetic latitude [deg]."""
+        return magnetic_latitude_deg(self.r_itrs_km)
+
+    @cached_property
+    def b_hat_body(self) -> FloatArray:
+        """Unit vector along the reference field, body frame [-]."""
+        b = self.b_ref_body_nt
+        return b / np.linalg.norm(b, axis=1, keepdims=True)
+
+    @cached_property
+    def transverse_body(self) -> FloatArray:
+        """Two unit vectors perpendicular to B, body frame, shape (N, 2, 3).
+
+        The first is magnetic east (dipole axis x position, projected perpendicular to B), the
+        second completes the right-handed set with B.
+        """
+        r_hat = self.r_itrs_km / np.linalg.norm(self.r_itrs_km, axis=1, keepdims=True)
+        east_itrs = np.cross(dipole_axis_itrs(), r_hat)
+        east_body = np.einsum("nij,nj->ni", self.rot_itrs_to_body, east_itrs)
+        b = self.b_hat_body
+        e1 = east_body - np.sum(east_body * b, axis=1, keepdims=True) * b
+        e1 /= np.maximum(np.linalg.norm(e1, axis=1, keepdims=True), 1e-12)
+        e2 = np.cross(b, e1)
+        return np.stack([e1, e2], axis=1)
+
+    @cached_property
+    def mlt_angle_rad(self) -> FloatArray | None:
+        """Magnetic local time angle [rad]: 0 at magnetic noon, +pi/2 at dusk (None without Sun).
+
+        The Sun direction is projected on the dipole equator (SM x); SM y = dipole axis x SM x.
+        """
+        if self.sun_body is None:
+            return None
+        z = dipole_axis_itrs()
+        sun_itrs = np.einsum("nji,nj->ni", self.rot_itrs_to_body, self.sun_body)
+        x_sm = sun_itrs - np.outer(sun_itrs @ z, z)
+        x_sm /= np.maximum(np.linalg.norm(x_sm, axis=1, keepdims=True), 1e-12)
+        y_sm = np.cross(z, x_sm)
+        r = self.r_itrs_km
+        return np.arctan2(np.sum(r * y_sm, axis=1), np.sum(r * x_sm, axis=1))
+
+    @cached_property
+    def orbit_phase_rad(self) -> FloatArray:
+        """Orbit phase, like the argument of latitude, from the ITRS track [rad].
+
+        The phase is unwrapped along the track and measured from the northward crossing of the
+        equator, which is all the attitude-error harmonics need.
+        """
+        lat = np.arcsin(self.r_itrs_km[:, 2] / np.linalg.norm(self.r_itrs_km, axis=1))
+        vz = _time_derivative(self.t_utc_s, self.r_itrs_km)[:, 2]
+        # lat = asin(sin i sin u): recover u in [0, 2 pi) from lat and the sign of the z velocity.
+        s = np.clip(np.sin(lat) / max(np.max(np.abs(np.sin(lat))), 1e-9), -1.0, 1.0)
+        u = np.arcsin(s)
+        return np.where(vz >= 0.0, np.mod(u, 2 * np.pi), np.pi - u)

@@ -1,0 +1,115 @@
+"""The diagnosis's options, in one typed place: every default of every door lives here.
+
+:class:`AttributionOptions` are the held-out attribution's settings (time blocks, chunks of the
+significance test, level, gain, steps); :class:`DiagnosisOptions` add what the front door decides
+(reference field, attitude frame, the crustal and external models offered, the learned model, the
+prior's widths, the seed and the BLAS threads). The CLI, the service, the notebook API and the
+benchmark build one of these and hand it to :func:`orbitcal.diagnose.diagnose`; no door keeps a
+default of its own.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+from orbitcal.diagnose.prior import DEFAULT_SIGMA_MATRIX, DEFAULT_SIGMA_OFFSET_NT
+
+__all__ = [
+    "DEFAULT_CRUST_MODEL",
+    "HOLDOUT_BLOCKS",
+    "N_BLOCKS",
+    "AttributionOptions",
+    "DiagnosisOptions",
+]
+
+#: Equal-duration time blocks of a diagnosis, and how many of the latest are held out.
+N_BLOCKS = 10
+HOLDOUT_BLOCKS = 3
+
+#: Crustal model used as the crustal_field candidate (Olsen et al. 2017).
+DEFAULT_CRUST_MODEL = "LCS-1"
+
+
+@dataclass(frozen=True)
+class AttributionOptions:
+    """Settings of the held-out attribution (:func:`orbitcal.diagnose.attribution.attribute`).
+
+    Attributes
+    ----------
+    n_blocks, holdout_blocks : int
+        Equal-duration time blocks; the last ``holdout_blocks`` are held out.
+    n_chunks : int
+        Consecutive chunks of the held-out span for the significance test.
+    n_chunks_local : int
+        Chunks for an effect confined to less than half of the held-out span (e.g. auroral
+        crossings), so that each chunk still spans a whole part of a crossing.
+    alpha : float
+        Family-wise significance level per selection step (Bonferroni over candidates).
+    min_gain : float
+        Minimum relative drop of the held-out RMS for an effect to be named [-].
+    max_steps : int
+        At most this many effects are selected. An effect with a regional test (auroral
+        currents) found in the calibration's residual takes one place; found only in what the
+        selected effects leave, it comes as one more.
+    tie_tolerance : float
+        Candidates whose held-out RMS is within this fraction of the best are ranked by the BIC
+        of their training fit instead [-].
+    robust : bool
+        Huber-reweighted fits.
+    split_tests : bool
+        Also run the split-fit tests (sunlit/eclipse, attitude regimes, time blocks).
+    """
+
+    n_blocks: int = N_BLOCKS
+    holdout_blocks: int = HOLDOUT_BLOCKS
+    n_chunks: int = 32
+    n_chunks_local: int = 16
+    alpha: float = 0.05
+    min_gain: float = 0.03
+    max_steps: int = 3
+    tie_tolerance: float = 0.01
+    robust: bool = True
+    split_tests: bool = True
+
+
+@dataclass(frozen=True)
+class DiagnosisOptions:
+    """Everything a diagnosis is asked with, besides the telemetry, the orbit and the prior.
+
+    Attributes
+    ----------
+    field : str
+        Reference field (``orbitcal.field`` name).
+    attitude_frame : {"GCRS", "ITRS"}
+        The frame of the table's quaternions.
+    crust_model : str or None
+        Crustal model offered to the crustal_field candidate; None to skip it (then the learned
+        model, if on, stands for it).
+    external_model : bool
+        Offer the RC-driven magnetospheric field to the external_field candidate.
+    learned : bool
+        Fit the seed-003 learned field model (the crustal candidate without a crustal model,
+        else a summary of what the final model leaves).
+    prior_sigma_matrix, prior_sigma_offset_nt : float
+        Widths of the prior made from a calibration document [-], [nT]
+        (:func:`orbitcal.diagnose.prior.prior_from_document`).
+    seed : int
+        Seeds the learned model when no generator is given.
+    one_blas_thread : bool
+        Run with one BLAS thread (many small products: more threads only spin,
+        :mod:`orbitcal.blas`).
+    attribution : AttributionOptions
+        The held-out attribution's settings.
+    """
+
+    field: str = "IGRF-14"
+    attitude_frame: str = "GCRS"
+    crust_model: str | None = DEFAULT_CRUST_MODEL
+    external_model: bool = True
+    learned: bool = True
+    prior_sigma_matrix: float = DEFAULT_SIGMA_MATRIX
+    prior_sigma_offset_nt: float = DEFAULT_SIGMA_OFFSET_NT
+    seed: int = 0
+    one_blas_thread: bool = True
+    attribution: AttributionOptions = dataclasses.field(default_factory=AttributionOptions)

@@ -1,0 +1,221 @@
+"""Telemetry to the diagnosis's arrays: reference field, rotations, Sun, RC index, crust.
+
+:func:`diagnosis_data` turns a validated :class:`orbitcal.telemetry.Telemetry` into the plain
+arrays of :class:`~orbitcal.diagnose.data.DiagnosisData`: the reference field in body axes
+through :mod:`orbitcal.truth`, ITRS->body rotations through :mod:`orbitcal.frames`, Sun and
+eclipse through :mod:`orbitcal.sun`, the RC index and a crustal model through
+:mod:`orbitcal.field`.
+"""
+
+from __future__ import annotations
+
+import warnings
+from functools import partial
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from orbitcal.arrays import FloatArray
+from orbitcal.diagnose.data import DiagnosisData
+from orbitcal.diagnose.options import DEFAULT_CRUST_MODEL, DiagnosisOptions
+from orbitcal.diagnose.prior import CalibrationPrior
+from orbitcal.diagnose.track import along_track
+from orbitcal.errors import BadInputError, NotEnoughDataError
+
+if TYPE_CHECKING:  # pragma: no cover
+    from orbitcal.orbit import Propagator
+    from orbitcal.telemetry import Telemetry
+
+__all__ = [
+    "CRUST_KNOT_SPACING_S",
+    "DEFAULT_CRUST_MODEL",
+    "diagnosis_data",
+    "field_body_nt",
+    "field_itrs_nt",
+    "rotation_itrs_to_body",
+]
+
+
+def rotation_itrs_to_body(
+    t_utc_s: FloatArray, q_wxyz: FloatArray, *, attitude_frame: str = "GCRS"
+) -> FloatArray:
+    """Matrices ``R`` with ``v_body = R @ v_itrs``, shape (N, 3, 3).
+
+    Parameters
+    ----------
+    t_utc_s : ndarray, shape (N,)
+        POSIX seconds of UTC [s].
+    q_wxyz : ndarray, shape (N, 4)
+        Body orientation in the attitude frame (CONTRACT section 1 convention).
+    attitude_frame : {"GCRS", "ITRS"}
+    """
+    from orbitcal import frames
+    from orbitcal.attitude import quat_wxyz_to_matrix
+
+    frame_to_body = quat_wxyz_to_matrix(q_wxyz)
+    frame = attitude_frame.upper()
+    if frame == "ITRS":
+        return np.asarray(frame_to_body)
+    if frame != "GCRS":
+        raise BadInputError(
+            f"attitude_frame must be GCRS or ITRS, not {attitude_frame!r}", field="attitude_frame"
+        )
+    gcrs_to_itrs = frames.gcrs_to_itrs_matrix(t_utc_s)
+    return np.asarray(np.einsum("nij,nkj->nik", frame_to_body, gcrs_to_itrs))
+
+
+#: Largest time between the samples at which the crustal model is evaluated [s]; between them
+#: the field is interpolated along the track (cubic spline of the ITRS components in time, per
+#: contiguous stretch). Its shortest wavelengths at orbit height are hundreds of km: on the
+#: one-day 1 Hz Swarm A world (LCS-1 to degree 185, 86,400 samples) a 10 s spacing (76 km)
+#: interpolates to 6.5e-5 nT rms and 2.5e-3 nT at worst, against a crustal field of 2.5 nT rms
+#: and sensor noise of 0.1 nT and more (``benchmarks/results/diagnose_timing.md``), with a tenth
+#: of the evaluations.
+CRUST_KNOT_SPACING_S = 10.0
+
+
+def field_itrs_nt(name: str, t: FloatArray, r_itrs_km: FloatArray) -> FloatArray:
+    from orbitcal import frames
+    from orbitcal.field import get_field
+
+    radius, colat, lon = frames.itrs_to_spherical(r_itrs_km)
+    b_nec = get_field(name).b_nec_nt(t, radius, colat, lon)
+    return np.asarray(frames.nec_to_itrs(b_nec, r_itrs_km))
+
+
+def field_body_nt(
+    name: str,
+    t: FloatArray,
+    r_itrs_km: FloatArray,
+    rot: FloatArray,
+    *,
+    knot_spacing_s: float | None = None,
+) -> FloatArray | None:
+    """The field model ``name`` in body axes at every sample [nT], shape (N, 3).
+
+    With ``knot_spacing_s`` it is evaluated at most that far apart in time and interpolated
+    along the track (:func:`orbitcal.diagnose.track.along_track`).
+    """
+    try:
+        if knot_spacing_s is None:
+            b_itrs = field_itrs_nt(name, t, r_itrs_km)
+        else:
+            b_itrs = along_track(partial(field_itrs_nt, name), t, r_itrs_km, knot_spacing_s)
+    except ValueError as exc:  # FieldRangeError: outside the model's span
+        warnings.warn(f"{name} not used as a candidate regressor: {exc}", stacklevel=3)
+        return None
+    return np.asarray(np.einsum("nij,nj->ni", rot, b_itrs))
+
+
+def diagnosis_data(
+    telemetry: Telemetry,
+    *,
+    orbit: Propagator | None = None,
+    options: DiagnosisOptions = DiagnosisOptions(),
+    calibration_prior: CalibrationPrior | None = None,
+) -> DiagnosisData:
+    """Build the attribution's arrays from a telemetry table.
+
+    Parameters
+    ----------
+    telemetry : Telemetry
+        Validated table with quaternions (vector residuals need the attitude).
+    orbit : Propagator, optional
+        Orbit for positions when the table has none (an :class:`orbitcal.orbit.Orbit`).
+    options : DiagnosisOptions
+        Its ``field`` (reference field), ``attitude_frame``, ``crust_model`` (None skips the
+        crustal model: ~1 s per 2000 samples at n = 185) and ``external_model`` (the RC-driven
+        magnetospheric field for the external_field candidate) are used here.
+    calibration_prior : CalibrationPrior, optional
+        The calibration in service (:func:`orbitcal.diagnose.prior.prior_from_document`) as a
+        prior on the 12 parameters: needed on short spans where a large external field is nearly
+        parallel to the main field (a storm pass) and a free scale factor would absorb it.
+
+    Raises
+    ------
+    BadInputError
+        No attitude quaternions, or an unknown attitude frame.
+    NotEnoughDataError
+        Fewer than two samples.
+    """
+    from orbitcal import frames
+    from orbitcal.sun import illumination_conical, sun_position_gcrs_km
+    from orbitcal.truth import truth_for_telemetry
+
+    field = options.field
+    attitude_frame = options.attitude_frame
+    crust_model = options.crust_model
+    if telemetry.q_wxyz is None:
+        raise BadInputError(
+            "the diagnosis needs attitude quaternions (q_w, q_x, q_y, q_z) to compare vectors",
+            field="q_w",
+        )
+    if np.size(telemetry.t_utc_s) < 2:
+        raise NotEnoughDataError(
+            f"the diagnosis needs a time series and got {np.size(telemetry.t_utc_s)} sample(s); "
+            "provide hours of telemetry (several orbits)"
+        )
+    truth = truth_for_telemetry(telemetry, orbit=orbit, attitude_frame=attitude_frame, field=field)
+    t = np.asarray(telemetry.t_utc_s, dtype=float)
+    rot = rotation_itrs_to_body(t, np.asarray(telemetry.q_wxyz), attitude_frame=attitude_frame)
+    r_itrs = np.asarray(truth.r_itrs_km, dtype=float)
+    b_ref_body = np.einsum("nij,nj->ni", rot, truth.b_itrs_nt)
+
+    r_gcrs = frames.itrs_to_gcrs(r_itrs, t)
+    sun_gcrs = sun_position_gcrs_km(t)
+    illumination = np.asarray(illumination_conical(r_gcrs, sun_gcrs), dtype=float)
+    s_gcrs = sun_gcrs - r_gcrs
+    s_itrs = frames.gcrs_to_itrs(s_gcrs / np.linalg.norm(s_gcrs, axis=1, keepdims=True), t)
+    sun_body = np.einsum("nij,nj->ni", rot, s_itrs)
+
+    names: list[str] = []
+    cols: list[FloatArray] = []
+    if telemetry.temperature_c is not None:
+        names.append("temperature")
+        cols.append(np.asarray(telemetry.temperature_c, dtype=float))
+    if telemetry.mtq_am2 is not None:
+        for k, axis in enumerate("xyz"):
+            names.append(f"mtq_{axis}")
+            cols.append(np.asarray(telemetry.mtq_am2[:, k], dtype=float))
+    for key, values in sorted(telemetry.hk.items()):
+        arr = np.asarray(values)
+        if arr.dtype.kind in "fiu" and np.all(np.isfinite(arr)):
+            names.append(key)
+            cols.append(arr.astype(float))
+    x_hk = np.column_stack(cols) if cols else np.zeros((0, 0))
+
+    rc_index = None
+    b_ext_body = None
+    if options.external_model:
+        try:
+            from orbitcal.field.external import ring_current_field
+
+            rc_e, rc_i = ring_current_field().rc_nt(t)
+            rc_index = np.asarray(rc_e + rc_i, dtype=float)
+            b_ext_body = field_body_nt("RC", t, r_itrs, rot)
+        except ValueError as exc:
+            warnings.warn(f"RC index not used: {exc}", stacklevel=2)
+    b_crust_body = (
+        field_body_nt(crust_model, t, r_itrs, rot, knot_spacing_s=CRUST_KNOT_SPACING_S)
+        if crust_model
+        else None
+    )
+    return DiagnosisData(
+        t_utc_s=t,
+        b_raw_nt=np.asarray(telemetry.b_raw_nt, dtype=float),
+        b_ref_body_nt=b_ref_body,
+        rot_itrs_to_body=rot,
+        r_itrs_km=r_itrs,
+        x_hk=x_hk,
+        hk_names=tuple(names),
+        sunlit=illumination > 0.5,
+        sun_body=sun_body,
+        rc_index_nt=rc_index,
+        b_crust_body_nt=b_crust_body,
+        crust_model=crust_model if b_crust_body is not None else None,
+        reference_field=truth.field_name,
+        illumination=illumination,
+        b_ext_body_nt=b_ext_body,
+        calibration_prior=calibration_prior,
+        positions_measured=telemetry.r_itrs_km is not None,
+    )
