@@ -247,7 +247,11 @@ def diagnose_parts(
             data, att.final_residual_nt, train=att.train, holdout=att.holdout, rng=rng
         )
         learned_result["fitted_to"] = "the final model's residual on the training blocks"
-    return build_report(data, att, where, learned=learned_result, where_final=where_final), att
+    report = build_report(data, att, where, learned=learned_result, where_final=where_final)
+    # Issue 25: check the report's claims on the held-out data (orbitcal.diagnose.honesty).
+    from orbitcal.diagnose.honesty import review_report
+
+    return review_report(report, data, att), att
 
 
 #: Name of the crustal_field variant the seed-003 model stands for.

@@ -33,6 +33,7 @@ import numpy as np
 
 from orbitcal.diagnose.attribution import attribute, fit_joint
 from orbitcal.diagnose.effects import EFFECT_NAMES, get_effect
+from orbitcal.diagnose.honesty import reviewed
 from orbitcal.metrics import norm_rms_nt
 
 __all__ = [
@@ -230,7 +231,7 @@ def run_case(
         cadence_s=cadence_s,
         crust_model=crust_model,
     )
-    att = attribute(data, split_tests=False)
+    att = reviewed(data, attribute(data, split_tests=False))  # issue 25: honesty.review
     elapsed = time.perf_counter() - t0
 
     # Oracle 1: knows the effect, fits its catalogue model the same way.
@@ -534,7 +535,7 @@ def run_compound_case(
     world, data = simulate_compound_world(
         case, tle_text=tle_text, n_orbits=n_orbits, cadence_s=cadence_s, crust_model=crust_model
     )
-    att = attribute(data, split_tests=False)
+    att = reviewed(data, attribute(data, split_tests=False))  # issue 25: honesty.review
     elapsed = time.perf_counter() - t0
 
     a_sensor = np.asarray(world.sensor.a_matrix)
