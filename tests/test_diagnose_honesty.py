@@ -146,3 +146,21 @@ def test_a_final_model_worse_than_the_calibration_alone_falls_back() -> None:
     assert rv.fell_back
     assert rv.keep == [] and rv.withdrawn == ["parameter_drift"]
     assert rv.final.rms_nt <= base_rms
+
+
+def test_a_span_shorter_than_an_orbit_holds_out_two_blocks_unless_told_otherwise() -> None:
+    from orbitcal.diagnose.span_options import SHORT_SPAN_HOLDOUT_BLOCKS, choose_options
+
+    rng = np.random.default_rng(2)
+    for n, cadence in ((1800, 1.0), (N, CADENCE_S)):  # 30 min at 1 Hz; 8.3 h at 10 s
+        t = np.arange(n) * cadence
+        ref = _reference(t)
+        data = _data(ref + rng.normal(scale=1.0, size=(n, 3)), t, ref)
+        options, why = choose_options(data, {})
+        if n * cadence < 5400.0:
+            assert options["holdout_blocks"] == SHORT_SPAN_HOLDOUT_BLOCKS
+            assert any("shorter than an orbit" in w for w in why)
+            # A choice the caller made is kept.
+            assert choose_options(data, {"holdout_blocks": 3})[0]["holdout_blocks"] == 3
+        else:
+            assert options == {} and why == []

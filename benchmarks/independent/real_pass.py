@@ -57,12 +57,20 @@ def judge(report: dict) -> dict:
     verdict = report["verdict"]
     honest_none = verdict == "none" and bool(gap.get("unexplained"))
     ok_verdict = verdict == "external_field"
+    # "cannot be separated from the calibration on this span", naming external_field
+    named_absorbed = any(
+        c["name"] == "external_field" and "absorbed by the calibration" in c["refused_because"]
+        for c in gap.get("closest_candidates", [])
+    )
     return {
         "verdict": verdict,
         "verdict_status": report.get("verdict_status"),
         "confidence": report.get("verdict_confidence"),
         "significant": sig,
         "ok": bool(ok_verdict and set(sig) <= ALLOWED),
+        "ok_or_explicit": bool(
+            (ok_verdict or (honest_none and named_absorbed)) and set(sig) <= ALLOWED
+        ),
         "only_allowed_significant": set(sig) <= ALLOWED,
         "none_with_gap": honest_none,
         "baseline_holdout_rms_nt": report["baseline"]["holdout_rms_nt"],
@@ -120,9 +128,13 @@ def main() -> None:
         f"--draws {args.draws} --seed {args.seed}",
         "wall_s": round(time.time() - t0, 1),
         "pass_rate": float(np.mean([r["ok"] for r in rows])),
+        "pass_or_explicit_rate": float(np.mean([r["ok_or_explicit"] for r in rows])),
         "by_attitude": {
             a: {
                 "pass_rate": float(np.mean([r["ok"] for r in rows if r["attitude"] == a])),
+                "pass_or_explicit_rate": float(
+                    np.mean([r["ok_or_explicit"] for r in rows if r["attitude"] == a])
+                ),
                 "verdicts": _count([r["verdict"] for r in rows if r["attitude"] == a]),
             }
             for a in ("tumbling", "nadir")

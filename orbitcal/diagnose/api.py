@@ -232,6 +232,10 @@ def diagnose_parts(
     cross-validation keeps a stage, its correction is the crustal_field candidate (``variant``
     ``"learned (seed 003)"``), judged on the held-out blocks like any other.
     """
+    # Issue 25: options a short span needs, chosen from the data (orbitcal.diagnose.span_options).
+    from orbitcal.diagnose.span_options import choose_options
+
+    attribute_options, chosen = choose_options(data, attribute_options)
     learned_result = None
     if learned and data.b_crust_body_nt is None:
         data, learned_result = _with_learned_crust(data, rng=rng, **attribute_options)
@@ -251,7 +255,7 @@ def diagnose_parts(
     # Issue 25: check the report's claims on the held-out data (orbitcal.diagnose.honesty).
     from orbitcal.diagnose.honesty import review_report
 
-    return review_report(report, data, att), att
+    return review_report(report, data, att, chosen=chosen), att
 
 
 #: Name of the crustal_field variant the seed-003 model stands for.

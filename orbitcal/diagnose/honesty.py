@@ -384,9 +384,25 @@ def review(data: DiagnosisData, att: Attribution) -> Review:
     return Review(keep, residues, withdrawn, fell_back, final)
 
 
-def review_report(report: dict[str, Any], data: DiagnosisData, att: Attribution) -> dict[str, Any]:
+def review_report(
+    report: dict[str, Any],
+    data: DiagnosisData,
+    att: Attribution,
+    *,
+    chosen: Sequence[str] = (),
+) -> dict[str, Any]:
     """Check the report's claims against the held-out data; returns the report with the
-    ``gap``, ``separable`` and ``honesty`` sections added and any withdrawn claim marked."""
+    ``gap``, ``separable`` and ``honesty`` sections added and any withdrawn claim marked.
+
+    ``chosen`` are the options the diagnosis chose from the data
+    (:func:`orbitcal.diagnose.span_options.choose_options`), stated in ``data.chosen_from_data``.
+    """
+    if "data" in report:
+        report["data"]["chosen_from_data"] = list(chosen)
+        share = float(np.count_nonzero(att.holdout)) / max(data.n, 1)
+        report["data"]["holdout"] = (
+            f"later time blocks (the last {share:.0%} of the samples) that no fit saw"
+        )
     by_name = {e["name"]: e for e in report["effects"]}
     for e in report["effects"]:
         limited = _bound_limited(e)
