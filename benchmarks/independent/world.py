@@ -341,6 +341,14 @@ def make_world(
         rv = walk + np.outer(flex, rng.normal(size=3) / np.sqrt(3))
         truth_att = body_to_gcrs * Rotation.from_rotvec(rv)
         truth["attitude_error_deg"] = float(np.degrees(amp))
+    if dt_true != 0.0:
+        # A time-tag error of the magnetometer: the whole sample belongs to t + dt -- the
+        # position (above), the Earth's rotation and the body's attitude.
+        from scipy.spatial.transform import Slerp
+
+        t_true = np.clip(t + dt_true, t[0], t[-1])
+        truth_att = Slerp(t, truth_att)(t_true)
+        g2i = gcrs_to_itrs_matrices(t + dt_true)
     b_gcrs = np.einsum("nji,nj->ni", g2i, b_itrs)
     b_body = truth_att.inv().apply(b_gcrs)
     sensor = draw_sensor(rng, matrix_pct=(0.5, 2.0), offset_nt=(20.0, 300.0), noise_nt=(1.0, 3.0))

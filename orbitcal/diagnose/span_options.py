@@ -5,13 +5,12 @@ Two choices that a short storm pass needs and a user running ``orbitcal diagnose
 defaults cannot be expected to make:
 
 * **Fitting on quiet magnetic latitudes.** When the residual of the calibration fitted on the
-  quiet latitudes of the training blocks shows auroral currents (the attribution's regional
-  test: at |magnetic latitude| > 55 deg its RMS exceeds 3x that of quiet latitudes, mostly
-  perpendicular to B, and latitude bumps fitted to each crossing predict it), every fit -- the
-  12 parameters included -- uses only samples at
-  |magnetic latitude| < 50 deg, as Swarm processing does. A crossing's hundreds of nT would
-  otherwise drag the 12 parameters, and the baseline's held-out residual at low latitude would be
-  the currents' imprint on the calibration rather than anything the data hold there.
+  quiet latitudes of the training blocks is more than 3x larger at |magnetic latitude| > 55 deg
+  than below 50 deg (a disturbance at auroral latitudes, whatever its shape), every fit -- the
+  12 parameters included -- uses only samples at |magnetic latitude| < 50 deg, as Swarm
+  processing does. A crossing's hundreds of nT would otherwise drag the 12 parameters, and the
+  baseline's held-out residual at low latitude would be the currents' imprint on the calibration
+  rather than anything the data hold there.
 * **Two held-out blocks of ten on a span shorter than an orbit.** Three of ten (30 %) leave the
   training blocks without a whole revolution's geometry on a 30-minute pass; two (20 %) keep the
   held-out span long enough for the chunked significance test while the fits see more of the
@@ -40,6 +39,9 @@ ORBIT_S = 5400.0
 SHORT_SPAN_HOLDOUT_BLOCKS = 2
 #: Fits use |magnetic latitude| below this when auroral currents are found [deg].
 QUIET_MLAT_DEG = 50.0
+#: Auroral latitudes, and how much larger the residual must be there than at quiet ones [deg, -].
+AURORAL_MLAT_DEG = 55.0
+AURORAL_EXCESS = 3.0
 #: Least number of quiet training samples for a quiet-latitude fit.
 MIN_QUIET_TRAIN = 200
 
@@ -50,13 +52,8 @@ def choose_options(data: DiagnosisData, given: dict[str, Any]) -> tuple[dict[str
     Returns the options (``given`` updated; a key in ``given`` wins) and one sentence per choice
     made, for the report.
     """
-    from orbitcal.diagnose.attribution import (
-        HOLDOUT_BLOCKS,
-        N_BLOCKS,
-        _regional_fac,
-        fit_joint,
-        time_blocks,
-    )
+    from orbitcal.diagnose.attribution import HOLDOUT_BLOCKS, N_BLOCKS, fit_joint, time_blocks
+    from orbitcal.metrics import norm_rms_nt
 
     out = dict(given)
     why: list[str] = []
@@ -80,13 +77,17 @@ def choose_options(data: DiagnosisData, given: dict[str, Any]) -> tuple[dict[str
             # the crossings and leave a residual everywhere, hiding where it comes from.
             base = fit_joint(data, train & quiet)
             r_base = data.b_raw_nt - base.predict_nt(data)
-            pre = _regional_fac(data, r_base, [])
-            if pre is not None and pre.significant:
-                out["fit_mask"] = quiet
-                why.append(
-                    "auroral currents in the calibration's residual (regional test: "
-                    f"{pre.params['rms_high_latitude_nt']:.0f} nT rms at high magnetic latitude "
-                    f"against {pre.params['rms_quiet_latitude_nt']:.0f} nT at quiet ones): every "
-                    f"fit uses |magnetic latitude| < {QUIET_MLAT_DEG:.0f} deg only"
-                )
+            high = np.abs(data.mlat_deg) > AURORAL_MLAT_DEG
+            if int(high.sum()) >= 30:
+                rms_high = norm_rms_nt(r_base[high])
+                rms_quiet = norm_rms_nt(r_base[quiet])
+                if rms_high > AURORAL_EXCESS * rms_quiet:
+                    out["fit_mask"] = quiet
+                    why.append(
+                        "a disturbance at auroral latitudes: the calibration fitted on quiet "
+                        f"latitudes leaves {rms_high:.0f} nT (norm rms) at |magnetic latitude| > "
+                        f"{AURORAL_MLAT_DEG:.0f} deg against {rms_quiet:.0f} nT below "
+                        f"{QUIET_MLAT_DEG:.0f} deg: every fit uses |magnetic latitude| < "
+                        f"{QUIET_MLAT_DEG:.0f} deg only"
+                    )
     return out, why
