@@ -85,12 +85,13 @@ def main() -> None:
     ap.add_argument("--draws", type=int, default=20)
     ap.add_argument("--seed", type=int, default=2500)
     ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--attitudes", nargs="+", default=["tumbling", "nadir"])
     args = ap.parse_args()
     t, r, b_itrs = load_pass()
     rows = []
     t0 = time.time()
     with tempfile.TemporaryDirectory() as tmp:
-        for attitude in ("tumbling", "nadir"):
+        for attitude in args.attitudes:
             for k in range(args.draws):
                 rng = np.random.default_rng([args.seed, k, attitude == "nadir"])
                 sensor = draw_sensor(rng)
@@ -137,7 +138,7 @@ def main() -> None:
                 ),
                 "verdicts": _count([r["verdict"] for r in rows if r["attitude"] == a]),
             }
-            for a in ("tumbling", "nadir")
+            for a in args.attitudes
         },
         "rows": rows,
     }

@@ -432,6 +432,7 @@ def review_report(
         )
     changed = keep != list(att.selected)
     if changed:
+        from orbitcal.diagnose.report import _clean
         from orbitcal.diagnose.where import where_analysis
 
         report["final"]["effects"] = list(keep)
@@ -439,7 +440,7 @@ def review_report(
         report["final"]["norm_holdout_rms_nt"] = round(final.rms_nt, 4)
         report["final"]["shrink"] = round(att.baseline_rms_nt / max(final.rms_nt, 1e-12), 4)
         report["final"]["where"] = (
-            where_analysis(data, final.residual_nt, holdout=holdout) if keep else None
+            _clean(where_analysis(data, final.residual_nt, holdout=holdout)) if keep else None
         )
         ranked = [by_name[n] for n in keep] + [
             e for e in report["effects"] if e["name"] not in keep
