@@ -6,6 +6,8 @@ fields whose shape is known, so that each rule is exercised on a case where the 
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 
@@ -164,3 +166,99 @@ def test_a_span_shorter_than_an_orbit_holds_out_two_blocks_unless_told_otherwise
             assert choose_options(data, {"holdout_blocks": 3})[0]["holdout_blocks"] == 3
         else:
             assert options == {} and why == []
+
+
+def _null_attribution(
+    slow_nt: float,
+) -> tuple[DiagnosisData, Attribution]:
+    """Nothing selected; the residual holds white noise of 2 nT and a slow field of ``slow_nt``."""
+    rng = np.random.default_rng(8)
+    t = np.arange(N) * CADENCE_S
+    ref = _reference(t)
+    slow = slow_nt * np.column_stack(
+        [np.sin(t / 2100.0), np.cos(t / 1700.0), np.sin(t / 2900.0 + 1.0)]
+    )
+    raw = ref + 30.0 + slow + rng.normal(scale=2.0, size=(N, 3))
+    data = _data(raw, t, ref)
+    train, holdout, _ = time_blocks(t)
+    base = fit_joint(data, train, [], robust=False, use_prior=False)
+    r = raw - base.predict_nt(data)
+    rms = norm_rms_nt(r[holdout])
+    att = Attribution(
+        baseline_rms_nt=rms,
+        baseline_train_rms_nt=norm_rms_nt(r[train]),
+        verdict="none",
+        effects=[],
+        selected=[],
+        final_rms_nt=rms,
+        train=train,
+        holdout=holdout,
+        baseline_residual_nt=r,
+        final_residual_nt=r,
+        fits={"baseline": base, "final": base},
+        verdict_confidence=0.99,
+    )
+    return data, att
+
+
+def _report(att: Attribution, verdict: str, confidence: float | None) -> dict[str, Any]:
+    rms = att.baseline_rms_nt / np.sqrt(3.0)
+    return {
+        "verdict": verdict,
+        "verdict_confidence": confidence,
+        "verdict_status": "",
+        "separation": [
+            {"effect": "time_offset", "absorbed_fraction": 1.0, "would_separate": "a prior"}
+        ],
+        "effects": [
+            {
+                "name": "time_offset",
+                "significant": verdict == "time_offset",
+                "status": "selected" if verdict == "time_offset" else "not significant",
+                "holdout_rms_after_nt": rms,
+                "shrink": 1.0,
+                "p_value": 0.5,
+                "param_intervals_90": {"dt_s": [-5.0, 0.2]},
+                "absorbed_by_calibration_fraction": 0.999,
+            }
+        ],
+        "final": {"effects": [], "holdout_rms_nt": rms, "where": None},
+        "where": {"concentration": "|mlat| 0-30 deg", "axis_rms_nt": [1.0, 1.0, 1.0]},
+        "data": {},
+    }
+
+
+def test_none_far_above_the_noise_is_an_unexplained_gap_with_its_candidates() -> None:
+    from orbitcal.diagnose.honesty import review_report
+
+    data, att = _null_attribution(slow_nt=40.0)
+    report = review_report(_report(att, "none", 0.99), data, att)
+    gap = report["gap"]
+    assert gap["unexplained"] and gap["times_noise"] > 5.0
+    assert gap["noise_floor_nt"] == pytest.approx(2.0, rel=0.15)
+    assert report["verdict_confidence"] is None  # no confidence in "none" beside such a gap
+    assert report["verdict_status"].startswith("none: an unexplained gap")
+    (closest,) = gap["closest_candidates"]
+    assert closest["refused_because"].startswith("absorbed by the calibration")
+    assert any("prior calibration" in w for w in gap["would_decide"])
+    assert report["effects"][0]["param_bound_limited"] == {"dt_s": True}
+    assert report["effects"][0]["bound_limited"] is True
+    # At the noise floor, "none" says so.
+    data, att = _null_attribution(slow_nt=0.0)
+    report = review_report(_report(att, "none", 0.99), data, att)
+    assert not report["gap"]["unexplained"]
+    assert report["verdict_status"] == "none: at the noise floor"
+
+
+def test_a_verdict_not_separable_and_unstable_says_both() -> None:
+    from orbitcal.diagnose.honesty import review_report
+
+    data, att = _null_attribution(slow_nt=0.0)
+    report = review_report(_report(att, "time_offset", 0.0), data, att)
+    assert report["separable"] is False
+    status = report["verdict_status"]
+    assert "wins only 0% of the resamples" in status and "is present" not in status
+    assert "cannot be separated from the calibration" in status
+    report = review_report(_report(att, "time_offset", 1.0), data, att)
+    assert report["verdict_status"].startswith("tentative: time_offset is present (confidence 100%")
+    assert report["verdict_confidence_of"] == "presence"

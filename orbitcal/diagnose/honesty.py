@@ -384,6 +384,10 @@ def review(data: DiagnosisData, att: Attribution) -> Review:
     return Review(keep, residues, withdrawn, fell_back, final)
 
 
+#: As :data:`orbitcal.diagnose.report.FIRM_CONFIDENCE`: below it a verdict is not stable.
+FIRM_CONFIDENCE = 0.8
+
+
 def review_report(
     report: dict[str, Any],
     data: DiagnosisData,
@@ -463,11 +467,16 @@ def review_report(
             report["verdict_status"] = "none: at the noise floor"
     elif not report["separable"]:
         report["verdict_status"] = (
-            f"tentative: {verdict} is present"
-            + (
-                f" (confidence {conf:.0%} over resamples of the held-out blocks)"
-                if conf is not None
-                else ""
+            (
+                f"tentative: {verdict} is present"
+                + (
+                    f" (confidence {conf:.0%} over resamples of the held-out blocks)"
+                    if conf is not None
+                    else ""
+                )
+                if conf is None or conf >= FIRM_CONFIDENCE
+                else f"tentative: {verdict} is named by the held-out test but wins only "
+                f"{conf:.0%} of the resamples of the held-out blocks"
             )
             + ", but its size cannot be separated from the calibration on this span "
             f"({separation[verdict]['absorbed_fraction']:.0%} of its field is a change of the 12 "
