@@ -58,8 +58,6 @@ RESIDUE_ALPHA = 0.01
 RESIDUE_MIN_GAIN = 0.03
 #: Chunks of the held-out span for the residue test.
 RESIDUE_CHUNKS = 16
-#: Magnetic latitudes the residue test uses when auroral currents are among the effects [deg].
-QUIET_MLAT_DEG = 50.0
 #: Effects judged by their own tests, not by the held-out blocks (never demoted here).
 OWN_TEST = frozenset({"field_aligned_currents"})
 #: What data would decide, beyond the closest candidates' own needs.
@@ -341,11 +339,17 @@ def review(data: DiagnosisData, att: Attribution) -> Review:
     keep = list(att.selected)
     steps = {e.name: e.step for e in att.effects if e.significant}
     test_holdout, test_train = att.holdout, att.train
-    if "field_aligned_currents" in att.selected:
-        quiet = np.abs(data.mlat_deg) < QUIET_MLAT_DEG
-        test_holdout, test_train = att.holdout & quiet, att.train & quiet
+    # Beside auroral currents the attribution already judged every other effect on quiet
+    # latitudes; the quiet held-out samples left are too few for a second test (on the compound
+    # benchmark, seed 192, it demoted four real effects of worlds with currents, none spurious).
+    currents = "field_aligned_currents" in att.selected
     regress = [n for n in fit_names if n not in OWN_TEST]
-    if fit_names and len(regress) >= 2 and int(test_holdout.sum()) >= 4 * RESIDUE_CHUNKS:
+    if (
+        not currents
+        and fit_names
+        and len(regress) >= 2
+        and int(test_holdout.sum()) >= 4 * RESIDUE_CHUNKS
+    ):
         fit = att.fits["final"]
         for k, name in enumerate(fit_names):
             if name in OWN_TEST or steps.get(name, 0) < 2:
