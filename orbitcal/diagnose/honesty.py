@@ -58,6 +58,11 @@ RESIDUE_ALPHA = 0.01
 RESIDUE_MIN_GAIN = 0.03
 #: Chunks of the held-out span for the residue test.
 RESIDUE_CHUNKS = 16
+#: The flexible candidates that take up what another effect's template misses (issue 25: on
+#: independent worlds these were called significant beside a real effect); only they face the
+#: residue test -- a published crustal model or an RC-driven field is no such stand-in (the
+#: residue test demoted a real crust in compound world 17 of plan seed 1).
+FLEXIBLE = frozenset({"attitude_error", "sun_driven", "magnetorquer", "nonlinearity"})
 #: Effects judged by their own tests, not by the held-out blocks (never demoted here).
 OWN_TEST = frozenset({"field_aligned_currents"})
 #: What data would decide, beyond the closest candidates' own needs.
@@ -352,7 +357,7 @@ def review(data: DiagnosisData, att: Attribution) -> Review:
     ):
         fit = att.fits["final"]
         for k, name in enumerate(fit_names):
-            if name in OWN_TEST or steps.get(name, 0) < 2:
+            if name not in FLEXIBLE or steps.get(name, 0) < 2:
                 continue
             res = residue_test(data, fit, k, test_train, test_holdout, name=name)
             residues.append(
