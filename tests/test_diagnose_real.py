@@ -335,3 +335,37 @@ def test_real_crust_mf7_found_with_lcs1() -> None:
     assert 0.5 < crust["params"]["crust_scale"] < 1.5  # LCS-1 stands for MF7 nearly one to one
     # The seed-003 learned model is reported with its own held-out score.
     assert report["learned"]["holdout_rms_after_nt"] > 0.0
+
+
+@pytest.mark.slow
+def test_swarm_storm_pass_through_the_public_entry_with_defaults(tmp_path: Path) -> None:
+    """Issue 25: the storm pass as a user gives it -- a section-1 table (ITRS quaternions,
+    Swarm's GPS positions) read by :func:`orbitcal.api.read_table` and diagnosed by
+    :func:`orbitcal.api.diagnose_table` with its defaults, no prior, no fit mask, no held-out
+    blocks chosen by hand. The diagnosis chooses both itself from the data, and what it claims
+    holds on the held-out blocks: no model worse than the calibration alone, nothing named but
+    the external field and the auroral currents, and a verdict of none only with the gap
+    stated."""
+    from orbitcal.api import diagnose_table, read_table
+
+    data, _, rot = _swarm_storm_data()
+    q = Rotation.from_matrix(np.transpose(rot, (0, 2, 1))).as_quat()  # body -> ITRS, x y z w
+    table = tmp_path / "pass.csv"
+    cols = np.column_stack([data.t_utc_s, data.b_raw_nt, q[:, [3, 0, 1, 2]], data.r_itrs_km])
+    header = "time,b_x,b_y,b_z,q_w,q_x,q_y,q_z,r_x,r_y,r_z"
+    np.savetxt(table, cols, delimiter=",", header=header, comments="", fmt="%.10g")
+    report = diagnose_table(read_table(table), attitude_frame="ITRS")
+    chosen = " ".join(report["data"]["chosen_from_data"])
+    assert "shorter than an orbit" in chosen and "auroral latitudes" in chosen, chosen
+    assert report["final"]["holdout_rms_nt"] <= report["baseline"]["holdout_rms_nt"]
+    significant = {e["name"] for e in report["effects"] if e["significant"]}
+    assert significant <= {"external_field", "field_aligned_currents"}, report["verdict_status"]
+    gap = report["gap"]
+    assert gap["noise_floor_nt"] == pytest.approx(1.0, rel=0.3)  # the sensor's 1 nT
+    if report["verdict"] == "none":
+        assert gap["unexplained"] and report["verdict_confidence"] is None
+        assert report["verdict_status"].startswith("none: an unexplained gap")
+    else:
+        assert report["verdict"] == "external_field"
+    for e in report["effects"]:
+        assert set(e["param_bound_limited"]) == set(e["param_intervals_90"])

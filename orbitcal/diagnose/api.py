@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from orbitcal.diagnose.evidence import evidence
-from orbitcal.diagnose.options import DiagnosisOptions
+from orbitcal.diagnose.options import AttributionOptions, DiagnosisOptions
 from orbitcal.diagnose.prepare import (
     CRUST_KNOT_SPACING_S,
     DEFAULT_CRUST_MODEL,
@@ -170,6 +170,7 @@ def _run(
     from orbitcal.diagnose.where import where_analysis
 
     rng = rng if rng is not None else np.random.default_rng(options.seed)
+    options, fit_mask, chosen = _chosen_from_data(data, options, fit_mask)
     learned_result = None
     if options.learned and data.b_crust_body_nt is None:
         data, learned_result = _with_learned_crust(data, options, rng, fit_mask)
@@ -186,8 +187,36 @@ def _run(
         )
         learned_result["fitted_to"] = "the final model's residual on the training blocks"
     document = build_report(data, att, where, learned=learned_result, where_final=where_final)
-    document["evidence"] = evidence(data, att)  # curves the HTML page draws (evidence.py)
-    return Diagnosis(report=Report.from_json(document), attribution=att, data=data)
+    # Issue 25: the report's claims checked on the held-out data (orbitcal.diagnose.honesty):
+    # possible residues, a fall-back when the final model is worse than the baseline, the gap.
+    from orbitcal.diagnose.honesty import review_report, reviewed
+
+    final_att = reviewed(data, att)
+    document["evidence"] = evidence(data, final_att)  # curves the HTML page draws (evidence.py)
+    document = review_report(document, data, att, chosen=chosen)
+    return Diagnosis(report=Report.from_json(document), attribution=final_att, data=data)
+
+
+def _chosen_from_data(
+    data: DiagnosisData, options: DiagnosisOptions, fit_mask: BoolArray | None
+) -> tuple[DiagnosisOptions, BoolArray | None, list[str]]:
+    """Options a short span needs, chosen from the data (:mod:`orbitcal.diagnose.span_options`):
+    held-out blocks and quiet-latitude fitting; a value the caller set (a non-default
+    ``holdout_blocks``, a ``fit_mask``) is kept. Returns the options, the fit mask and one
+    sentence per choice for the report."""
+    from orbitcal.diagnose.span_options import choose_options
+
+    given: dict[str, Any] = {"n_blocks": options.attribution.n_blocks}
+    if options.attribution.holdout_blocks != AttributionOptions().holdout_blocks:
+        given["holdout_blocks"] = options.attribution.holdout_blocks
+    if fit_mask is not None:
+        given["fit_mask"] = fit_mask
+    out, chosen = choose_options(data, given)
+    attribution = dataclasses.replace(
+        options.attribution,
+        holdout_blocks=int(out.get("holdout_blocks", options.attribution.holdout_blocks)),
+    )
+    return dataclasses.replace(options, attribution=attribution), out.get("fit_mask"), chosen
 
 
 def _with_learned_crust(

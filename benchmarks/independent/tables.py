@@ -1,0 +1,128 @@
+"""Markdown tables from the JSON results of ``real_pass.py`` and ``run_worlds.py``.
+
+    python benchmarks/independent/tables.py --real BEFORE.json AFTER.json \
+        --worlds LABEL=FILE ... > benchmarks/results/diagnose_independent.md
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+
+def _real(before: dict, after: dict) -> list[str]:
+    keys_a = {(r["attitude"], r["draw"]) for r in after["rows"]}
+    rows_b = [r for r in before["rows"] if (r["attitude"], r["draw"]) in keys_a]
+    keys = {(r["attitude"], r["draw"]) for r in rows_b}
+    after_by = {
+        (r["attitude"], r["draw"]): r for r in after["rows"] if (r["attitude"], r["draw"]) in keys
+    }
+    rows_a = [after_by[(r["attitude"], r["draw"])] for r in rows_b]
+    out = [
+        "## The real Swarm A storm pass through drawn sensors and attitudes (`real_pass.py`)",
+        "",
+        f"Before: {before['commit']}, after: {after['commit']}; `{after['command']}`.",
+        "A draw passes when the verdict is external_field and nothing but external_field and",
+        "field_aligned_currents is significant. Counted over the draws that finished in both runs.",
+        "",
+        "| | before | after |",
+        "|---|---:|---:|",
+    ]
+
+    def stat(rows: list[dict], att: str | None) -> str:
+        sel = [r for r in rows if att is None or r["attitude"] == att]
+        return f"{sum(bool(r['ok']) for r in sel)} of {len(sel)}"
+
+    for att in (None, "tumbling", "nadir"):
+        label = "passing draws" + (f", {att}" if att else "")
+        out.append(f"| {label} | {stat(rows_b, att)} | {stat(rows_a, att)} |")
+    gapless = [
+        sum(r["verdict"] == "none" and not r.get("none_with_gap") for r in x)
+        for x in (rows_b, rows_a)
+    ]
+    out.append(f"| verdict none without a stated gap | {gapless[0]} | {gapless[1]} |")
+    worse = [
+        sum(
+            (r.get("final_holdout_rms_nt") or 0) > (r.get("baseline_holdout_rms_nt") or 0) + 1e-9
+            for r in x
+        )
+        for x in (rows_b, rows_a)
+    ]
+    out.append(
+        f"| final model worse than the baseline on held-out data | {worse[0]} | {worse[1]} |"
+    )
+    extra = [sum(not r["only_allowed_significant"] for r in x) for x in (rows_b, rows_a)]
+    out.append(
+        f"| another effect significant besides external_field / currents |"
+        f" {extra[0]} | {extra[1]} |"
+    )
+    out += [
+        "",
+        "| attitude | draw | rate [deg/s] | matrix err [%] | noise [nT] |"
+        " before: verdict; significant; held-out nT |"
+        " after: verdict; significant; held-out nT; gap |",
+        "|---|---:|---:|---:|---:|---|---|",
+    ]
+    for b, a in zip(rows_b, rows_a, strict=True):
+        gap = f"gap {a['gap_nt']:.1f} nT" if a.get("gap_nt") is not None else ""
+        out.append(
+            f"| {b['attitude']} | {b['draw']} | {b['rate_deg_s']} |"
+            f" {b['matrix_error_rms_pct']:.2f} | {b['noise_nt']} |"
+            f" {b['verdict']}; {', '.join(b['significant']) or '-'};"
+            f" {b['baseline_holdout_rms_nt']:.1f} -> {b['final_holdout_rms_nt']:.1f} |"
+            f" {a['verdict']}; {', '.join(a['significant']) or '-'};"
+            f" {a['baseline_holdout_rms_nt']:.1f} -> {a['final_holdout_rms_nt']:.1f}; {gap} |"
+        )
+    return out
+
+
+def _worlds(runs: list[tuple[str, dict]]) -> list[str]:
+    out = [
+        "## Independent worlds (`world.py`, `run_worlds.py`) through `orbitcal diagnose`",
+        "",
+        "| run | commit | compound worlds | recall | worlds with a spurious effect |"
+        " verdict among injected | dt 90 % coverage (n) | null worlds | null false alarms |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for label, s in runs:
+        cov = s.get("dt_interval_coverage_90")
+        cov_s = f"{cov:.0%} ({s['dt_intervals']})" if cov is not None else "-"
+        out.append(
+            f"| {label} | {s['commit']} | {s['compound_worlds']} | {s['recall']:.1%} |"
+            f" {s['worlds_with_spurious']:.1%} | {s['verdict_among_injected']:.1%} | {cov_s} |"
+            f" {s['null_worlds']} | {s['null_false_alarm_rate']:.1%} |"
+        )
+    out += ["", "False alarms of the null worlds by noise kind:", ""]
+    kinds = sorted({k for _, s in runs for k in s["null_by_noise_kind"]})
+    out.append("| run | " + " | ".join(kinds) + " |")
+    out.append("|---|" + "---:|" * len(kinds))
+    for label, s in runs:
+        cells = []
+        for k in kinds:
+            v = s["null_by_noise_kind"].get(k)
+            cells.append(f"{v['false_alarm_rate']:.0%} of {v['worlds']}" if v else "-")
+        out.append(f"| {label} | " + " | ".join(cells) + " |")
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--real", nargs=2, type=Path)
+    ap.add_argument("--worlds", nargs="*", default=[])
+    args = ap.parse_args()
+    lines: list[str] = []
+    if args.real:
+        b, a = (json.loads(p.read_text()) for p in args.real)
+        lines += [*_real(b, a), ""]
+    if args.worlds:
+        runs = []
+        for spec in args.worlds:
+            label, path = spec.split("=", 1)
+            runs.append((label, json.loads(Path(path).read_text())))
+        lines += _worlds(runs)
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()

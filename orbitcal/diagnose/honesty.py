@@ -1,0 +1,524 @@
+"""A report that knows when it cannot tell (issue 25).
+
+The attribution (:func:`orbitcal.diagnose.attribution.attribute`) selects effects by how much
+they shrink the held-out residual; :func:`review_report` then checks what it is about to claim
+against the same held-out data, and says so where a claim does not hold:
+
+* **Possible residue.** A second or third selected effect is named only if it explains a share of
+  the held-out residual that an *imperfect* model of the other selected effects cannot: each of
+  their fitted fields is given a free scale per axis, a linear drift of that scale over the span
+  and a small shift in time (its time derivative), and the effect's own fitted field must still
+  shrink the held-out residual significantly beside these (:func:`residue_test`). Real effects
+  never have exactly the catalogue's shape; what the template of a real effect misses is
+  otherwise handed to the next flexible candidate and called significant.
+* **Never worse than the baseline.** If the final model's held-out RMS exceeds the calibration's
+  alone, the last effects are withdrawn until it does not (falling back to the calibration
+  alone), and the report says so (``honesty.fell_back``).
+* **"none" means the noise floor.** The white-noise level of the final residual is estimated from
+  its second differences (:func:`noise_floor_nt`); the ``gap`` section states how far the
+  held-out residual is above it, where it lies, the candidates that came closest and why each
+  was refused, and what data would decide.
+* **Words and intervals that agree.** ``separable`` and the verdict's status come from the same
+  absorbed fraction; an interval that reaches a parameter's physical bound is marked
+  ``bound_limited`` (``param_bound_limited`` per parameter): it shows the range, not a
+  measurement.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from orbitcal.arrays import BoolArray, FloatArray
+from orbitcal.diagnose.bounds import param_range
+from orbitcal.diagnose.signed_rank import signed_rank_greater_p
+from orbitcal.metrics import norm_rms_nt
+
+if TYPE_CHECKING:  # pragma: no cover
+    from orbitcal.diagnose.attribution import Attribution, JointFit
+    from orbitcal.diagnose.effects import DiagnosisData
+
+__all__ = [
+    "GAP_TIMES_NOISE",
+    "ResidueResult",
+    "noise_floor_nt",
+    "residue_test",
+    "review",
+    "review_report",
+    "reviewed",
+]
+
+#: A held-out residual more than this many times the noise floor is an unexplained gap [-].
+GAP_TIMES_NOISE = 1.5
+#: The residue test's significance level and least relative gain of the held-out RMS.
+RESIDUE_ALPHA = 0.01
+RESIDUE_MIN_GAIN = 0.03
+#: Chunks of the held-out span for the residue test.
+RESIDUE_CHUNKS = 16
+#: The flexible candidates that take up what another effect's template misses (issue 25: on
+#: independent worlds these were called significant beside a real effect); only they face the
+#: residue test -- a published crustal model or an RC-driven field is no such stand-in (the
+#: residue test demoted a real crust in compound world 17 of plan seed 1).
+FLEXIBLE = frozenset({"attitude_error", "sun_driven", "magnetorquer", "nonlinearity"})
+#: Effects judged by their own tests, not by the held-out blocks (never demoted here).
+OWN_TEST = frozenset({"field_aligned_currents"})
+#: What data would decide, beyond the closest candidates' own needs.
+GENERAL_DECIDERS = (
+    "a prior calibration (orbitcal diagnose --calibration CAL.json)",
+    "a longer span (more orbits in the training and held-out blocks)",
+    "other attitudes (body rates and orientations that move each axis through the field)",
+)
+
+
+def noise_floor_nt(residual_nt: FloatArray, mask: BoolArray | None = None) -> float:
+    """White-noise level of a residual per component [nT] from its second differences.
+
+    For white noise of standard deviation sigma, ``r[k+1] - 2 r[k] + r[k-1]`` has standard
+    deviation ``sqrt(6) sigma``; slow signals (an orbit-scale mismatch, a drift) cancel in it. The
+    median absolute value (``0.6745 sigma`` for a normal variable) keeps spikes and short auroral
+    structures from raising the estimate. Second differences across a gap are not used.
+    """
+    r = np.asarray(residual_nt, dtype=float)
+    idx = np.flatnonzero(mask) if mask is not None else np.arange(r.shape[0])
+    if idx.size < 8:
+        return float("nan")
+    consecutive = (np.diff(idx[:-1]) == 1) & (np.diff(idx[1:]) == 1)
+    d2 = r[idx[2:]] - 2.0 * r[idx[1:-1]] + r[idx[:-2]]
+    d2 = d2[consecutive]
+    if d2.shape[0] < 5:
+        return float("nan")
+    per_axis = np.median(np.abs(d2), axis=0) / 0.6745 / np.sqrt(6.0)
+    return float(np.sqrt(np.mean(per_axis**2)))
+
+
+@dataclass(frozen=True)
+class ResidueResult:
+    """The residue test of one selected effect.
+
+    Attributes
+    ----------
+    name : str
+    holdout_rms_others_nt : float
+        Held-out RMS with the other effects' imperfect model only [nT].
+    holdout_rms_with_nt : float
+        The same with the effect's own field added [nT].
+    p_value : float
+        One-sided signed-rank test of the per-chunk log ratio.
+    residue : bool
+        True when the effect does not explain a significant share beyond the imperfect model.
+    """
+
+    name: str
+    holdout_rms_others_nt: float
+    holdout_rms_with_nt: float
+    p_value: float
+    residue: bool
+
+    @property
+    def gain(self) -> float:
+        """Relative drop of the held-out RMS due to the effect [-]."""
+        return 1.0 - self.holdout_rms_with_nt / max(self.holdout_rms_others_nt, 1e-12)
+
+
+def _time_derivative(t_s: FloatArray, x: FloatArray) -> FloatArray:
+    return np.asarray(np.gradient(x, t_s, axis=0)) if t_s.size > 2 else np.zeros_like(x)
+
+
+def residue_test(
+    data: DiagnosisData,
+    fit: JointFit,
+    k: int,
+    train: BoolArray,
+    holdout: BoolArray,
+    *,
+    name: str = "",
+) -> ResidueResult:
+    """Does block ``k`` of ``fit`` explain what an imperfect model of the other blocks cannot?
+
+    Per sensor axis ``i``, the residual of the joint model without block ``k`` is fitted on the
+    training samples with the calibration's columns (``b_ref`` and an offset) and, for every other
+    block ``j``, its fitted field ``f_j[:, i]``, ``tau * f_j[:, i]`` (a scale drifting over the
+    span) and ``df_j/dt[:, i]`` (a shift in time); then once more with block ``k``'s fitted field
+    ``f_k[:, i]`` added. Both are judged on the held-out samples in :data:`RESIDUE_CHUNKS`
+    consecutive chunks (one-sided signed-rank test of the log ratio of their mean squares).
+    """
+    t = data.t_utc_s
+    full = fit.predict_nt(data)
+    own = fit.effect_nt(k)
+    y = data.b_raw_nt - (full - own)  # the joint model's residual without block k
+    span = float(t[-1] - t[0]) or 1.0
+    tau = ((t - t[0]) / span - 0.5)[:, None]
+    others = [fit.effect_nt(j) for j in range(len(fit.blocks)) if j != k]
+    nuisance_axes: list[FloatArray] = []
+    for i in range(3):
+        cols = [data.b_ref_body_nt, np.ones((data.n, 1))]
+        for f in others:
+            fi = f[:, i : i + 1]
+            cols += [fi, tau * fi, _time_derivative(t, fi)]
+        nuisance_axes.append(np.column_stack(cols))
+    r_without = np.empty_like(y)
+    r_with = np.empty_like(y)
+    for i in range(3):
+        x0 = nuisance_axes[i]
+        x1 = np.column_stack([x0, own[:, i]])
+        for x, out in ((x0, r_without), (x1, r_with)):
+            scale = np.maximum(np.sqrt(np.mean(x[train] ** 2, axis=0)), 1e-12)
+            coef, *_ = np.linalg.lstsq(x[train] / scale, y[train, i], rcond=None)
+            out[:, i] = y[:, i] - (x / scale) @ coef
+    rms0 = norm_rms_nt(r_without[holdout])
+    rms1 = norm_rms_nt(r_with[holdout])
+    e0 = np.sum(r_without[holdout] ** 2, axis=1)
+    e1 = np.sum(r_with[holdout] ** 2, axis=1)
+    parts = [c for c in np.array_split(np.arange(e0.size), RESIDUE_CHUNKS) if c.size]
+    d = np.array([np.log(max(e0[c].mean(), 1e-300) / max(e1[c].mean(), 1e-300)) for c in parts])
+    p = signed_rank_greater_p(d) if d.size else float("nan")
+    gain = 1.0 - rms1 / max(rms0, 1e-12)
+    residue = bool(not (np.isfinite(p) and p < RESIDUE_ALPHA) or gain < RESIDUE_MIN_GAIN)
+    return ResidueResult(name, rms0, rms1, float(p), residue)
+
+
+def _fit_names(att: Attribution) -> list[str]:
+    """The effect name of every block of the final joint fit, in order."""
+    fit = att.fits.get("final")
+    if fit is None:
+        return []
+    regress = [n for n in att.selected if n not in OWN_TEST]
+    names = regress[: len(fit.blocks)]
+    if len(names) < len(fit.blocks) and "field_aligned_currents" in att.selected:
+        names.append("field_aligned_currents")
+    return names if len(names) == len(fit.blocks) else []
+
+
+@dataclass
+class _Final:
+    names: list[str]
+    fit: JointFit | None
+    residual_nt: FloatArray
+    rms_nt: float
+
+
+def _refit(
+    data: DiagnosisData, att: Attribution, fit_names: Sequence[str], keep: Sequence[str]
+) -> _Final:
+    from orbitcal.diagnose.attribution import fit_joint
+
+    fit = att.fits["final"]
+    blocks = [b for b, n in zip(fit.blocks, fit_names, strict=True) if n in keep]
+    if not blocks:
+        r = att.baseline_residual_nt
+        return _Final(
+            [n for n in keep if n in OWN_TEST], att.fits.get("baseline"), r, att.baseline_rms_nt
+        )
+    new = fit_joint(data, att.train, blocks)
+    r = data.b_raw_nt - new.predict_nt(data)
+    return _Final(list(keep), new, r, norm_rms_nt(r[att.holdout]))
+
+
+def _bound_limited(effect: dict[str, Any]) -> dict[str, bool]:
+    out: dict[str, bool] = {}
+    for name, iv in (effect.get("param_intervals_90") or {}).items():
+        if iv is None or len(iv) != 2 or iv[0] is None or iv[1] is None:
+            continue
+        rng = param_range(name)
+        tol = 1e-6 * max(
+            abs(rng.lower) if np.isfinite(rng.lower) else 0.0,
+            abs(rng.upper) if np.isfinite(rng.upper) else 0.0,
+            1.0,
+        )
+        lo_hit = bool(np.isfinite(rng.lower) and float(iv[0]) <= rng.lower + tol)
+        hi_hit = bool(np.isfinite(rng.upper) and float(iv[1]) >= rng.upper - tol)
+        out[name] = lo_hit or hi_hit
+    return out
+
+
+def _refusal(e: dict[str, Any]) -> str:
+    if e.get("status") == "implausible":
+        return f"implausible: {e.get('implausible_reason')}"
+    if e.get("status") == "possible residue":
+        return str(e.get("residue_reason"))
+    absorbed = e.get("absorbed_by_calibration_fraction")
+    if absorbed is not None and absorbed >= 0.9:
+        return (
+            f"absorbed by the calibration: {absorbed:.0%} of its fitted field is a change of the "
+            "12 parameters on this span"
+        )
+    return (
+        f"not significant: held-out shrink {e.get('shrink')} (p = {e.get('p_value')}), "
+        "within what chance or the calibration's own error explain"
+    )
+
+
+def _gap(
+    report: dict[str, Any],
+    data: DiagnosisData,
+    final: _Final,
+    holdout: BoolArray,
+) -> dict[str, Any]:
+    from orbitcal.diagnose.report import SEPARATING_DATA
+
+    sigma = noise_floor_nt(final.residual_nt, holdout)
+    rms = final.rms_nt / np.sqrt(3.0)  # per component, as sigma
+    times = float(rms / sigma) if np.isfinite(sigma) and sigma > 0 else float("nan")
+    unexplained = bool(np.isfinite(times) and times > GAP_TIMES_NOISE)
+    excess = float(np.sqrt(max(rms**2 - sigma**2, 0.0))) if np.isfinite(sigma) else float("nan")
+    where = (report.get("final") or {}).get("where") or report.get("where") or {}
+    closest = sorted(
+        (e for e in report["effects"] if not e["significant"]),
+        key=lambda e: (e.get("holdout_rms_after_nt") is None, e.get("holdout_rms_after_nt") or 0.0),
+    )[:3]
+    decide = [
+        *dict.fromkeys(SEPARATING_DATA[e["name"]] for e in closest if e["name"] in SEPARATING_DATA),
+        *GENERAL_DECIDERS,
+    ]
+    gap: dict[str, Any] = {
+        "unexplained": unexplained,
+        "holdout_rms_nt": round(float(rms), 4),
+        "noise_floor_nt": round(float(sigma), 4) if np.isfinite(sigma) else None,
+        "times_noise": round(times, 2) if np.isfinite(times) else None,
+        "excess_rms_nt": round(excess, 4) if np.isfinite(excess) else None,
+        "noise_floor_from": "second differences of the final residual on the held-out samples "
+        "(median absolute value): the white part of the noise",
+        "where": {
+            "concentration": where.get("concentration"),
+            "axis_rms_nt": where.get("axis_rms_nt"),
+        },
+        "closest_candidates": [
+            {
+                "name": e["name"],
+                "holdout_rms_after_nt": e.get("holdout_rms_after_nt"),
+                "shrink": e.get("shrink"),
+                "refused_because": _refusal(e),
+            }
+            for e in closest
+        ],
+        "would_decide": decide,
+    }
+    if unexplained:
+        gap["statement"] = (
+            f"an unexplained gap: the held-out residual is {rms:.3g} nT per component, "
+            f"{times:.1f} x the noise floor ({sigma:.3g} nT); no candidate explains it"
+            + (
+                f"; it lies mostly at {where['concentration']}"
+                if where.get("concentration")
+                else ""
+            )
+        )
+    else:
+        gap["statement"] = (
+            f"the held-out residual is at the noise floor ({times:.2f} x {sigma:.3g} nT)"
+        )
+    return gap
+
+
+@dataclass
+class Review:
+    """What the held-out data allow the report to claim.
+
+    Attributes
+    ----------
+    keep : list of str
+        The selected effects that stand, in selection order.
+    residues : list of dict
+        One residue test per selected effect after the first (see :func:`residue_test`).
+    withdrawn : list of str
+        Effects withdrawn because the final model with them was worse than the baseline.
+    fell_back : bool
+    final : _Final
+        The final model of ``keep`` (refitted when anything was removed).
+    """
+
+    keep: list[str]
+    residues: list[dict[str, Any]]
+    withdrawn: list[str]
+    fell_back: bool
+    final: _Final
+
+
+def review(data: DiagnosisData, att: Attribution) -> Review:
+    """The residue tests and the fall-back of :func:`review_report`, without the report."""
+    fit_names = _fit_names(att)
+    residues: list[dict[str, Any]] = []
+    keep = list(att.selected)
+    steps = {e.name: e.step for e in att.effects if e.significant}
+    test_holdout, test_train = att.holdout, att.train
+    # Beside auroral currents the attribution already judged every other effect on quiet
+    # latitudes; the quiet held-out samples left are too few for a second test (on the compound
+    # benchmark, seed 192, it demoted four real effects of worlds with currents, none spurious).
+    currents = "field_aligned_currents" in att.selected
+    regress = [n for n in fit_names if n not in OWN_TEST]
+    if (
+        not currents
+        and fit_names
+        and len(regress) >= 2
+        and int(test_holdout.sum()) >= 4 * RESIDUE_CHUNKS
+    ):
+        fit = att.fits["final"]
+        for k, name in enumerate(fit_names):
+            if name not in FLEXIBLE or steps.get(name, 0) < 2:
+                continue
+            res = residue_test(data, fit, k, test_train, test_holdout, name=name)
+            residues.append(
+                {
+                    "effect": name,
+                    "holdout_rms_others_imperfect_nt": round(res.holdout_rms_others_nt, 4),
+                    "holdout_rms_with_nt": round(res.holdout_rms_with_nt, 4),
+                    "gain": round(res.gain, 4),
+                    "p_value": float(f"{res.p_value:.3g}"),
+                    "possible_residue": res.residue,
+                }
+            )
+            if res.residue:
+                keep.remove(name)
+    final = _Final(
+        list(att.selected), att.fits.get("final"), att.final_residual_nt, att.final_rms_nt
+    )
+    if keep != list(att.selected) and fit_names:
+        final = _refit(data, att, fit_names, keep)
+    fell_back = False
+    withdrawn: list[str] = []
+    while final.rms_nt > att.baseline_rms_nt and keep and fit_names:
+        fell_back = True
+        withdrawn.append(keep.pop())
+        final = _refit(data, att, fit_names, keep)
+    if final.rms_nt > att.baseline_rms_nt and keep:
+        # Effects judged by their own tests (no block in the final fit) cannot be refitted out.
+        fell_back = True
+        withdrawn += keep[::-1]
+        keep = []
+    if not keep and final.rms_nt > att.baseline_rms_nt:
+        final = _Final([], att.fits.get("baseline"), att.baseline_residual_nt, att.baseline_rms_nt)
+    return Review(keep, residues, withdrawn, fell_back, final)
+
+
+#: As :data:`orbitcal.diagnose.report.FIRM_CONFIDENCE`: below it a verdict is not stable.
+FIRM_CONFIDENCE = 0.8
+
+
+def review_report(
+    report: dict[str, Any],
+    data: DiagnosisData,
+    att: Attribution,
+    *,
+    chosen: Sequence[str] = (),
+) -> dict[str, Any]:
+    """Check the report's claims against the held-out data; returns the report with the
+    ``gap``, ``separable`` and ``honesty`` sections added and any withdrawn claim marked.
+
+    ``chosen`` are the options the diagnosis chose from the data
+    (:func:`orbitcal.diagnose.span_options.choose_options`), stated in ``data.chosen_from_data``.
+    """
+    if "data" in report:
+        report["data"]["chosen_from_data"] = list(chosen)
+        share = float(np.count_nonzero(att.holdout)) / max(data.n, 1)
+        report["data"]["holdout"] = (
+            f"later time blocks (the last {share:.0%} of the samples) that no fit saw"
+        )
+    by_name = {e["name"]: e for e in report["effects"]}
+    for e in report["effects"]:
+        limited = _bound_limited(e)
+        e["param_bound_limited"] = limited
+        e["bound_limited"] = any(limited.values())
+    rv = review(data, att)
+    keep, final, holdout = rv.keep, rv.final, att.holdout
+    residues, withdrawn, fell_back = rv.residues, rv.withdrawn, rv.fell_back
+    for r in residues:
+        if not r["possible_residue"]:
+            continue
+        e = by_name[r["effect"]]
+        e["significant"] = False
+        e["status"] = "possible residue"
+        e["residue_reason"] = (
+            "possible residue: beside the other selected effects with a free scale per "
+            "axis, a drift of it and a shift in time (their imperfect models), its field "
+            f"shrinks the held-out residual by {r['gain']:.1%} (p = {r['p_value']:.2g}): "
+            "what it takes may be what the others' templates miss"
+        )
+    for name in withdrawn:
+        e = by_name[name]
+        e["significant"] = False
+        e["status"] = "withdrawn"
+        e["withdrawn_reason"] = (
+            "the final model with it was worse on the held-out blocks than the calibration alone"
+        )
+    changed = keep != list(att.selected)
+    if changed:
+        from orbitcal.diagnose.report import _clean
+        from orbitcal.diagnose.where import where_analysis
+
+        report["final"]["effects"] = list(keep)
+        report["final"]["holdout_rms_nt"] = round(final.rms_nt / np.sqrt(3.0), 4)
+        report["final"]["norm_holdout_rms_nt"] = round(final.rms_nt, 4)
+        report["final"]["shrink"] = round(att.baseline_rms_nt / max(final.rms_nt, 1e-12), 4)
+        report["final"]["where"] = (
+            _clean(where_analysis(data, final.residual_nt, holdout=holdout)) if keep else None
+        )
+        ranked = [by_name[n] for n in keep] + [
+            e for e in report["effects"] if e["name"] not in keep
+        ]
+        report["effects"] = ranked
+        new_verdict = keep[0] if keep else "none"
+        if new_verdict != report["verdict"]:
+            report["verdict"] = new_verdict
+            report["verdict_confidence"] = None
+    report["gap"] = _gap(report, data, final, holdout)
+    separation = {s["effect"]: s for s in report.get("separation") or []}
+    verdict = report["verdict"]
+    report["separable"] = None if verdict == "none" else verdict not in separation
+    conf = report.get("verdict_confidence")
+    if verdict == "none":
+        if report["gap"]["unexplained"]:
+            report["verdict_confidence"] = None
+            report["verdict_status"] = "none: " + report["gap"]["statement"]
+        else:
+            report["verdict_status"] = "none: at the noise floor"
+    elif not report["separable"]:
+        report["verdict_status"] = (
+            (
+                f"tentative: {verdict} is present"
+                + (
+                    f" (confidence {conf:.0%} over resamples of the held-out blocks)"
+                    if conf is not None
+                    else ""
+                )
+                if conf is None or conf >= FIRM_CONFIDENCE
+                else f"tentative: {verdict} is named by the held-out test but wins only "
+                f"{conf:.0%} of the resamples of the held-out blocks"
+            )
+            + ", but its size cannot be separated from the calibration on this span "
+            f"({separation[verdict]['absorbed_fraction']:.0%} of its field is a change of the 12 "
+            f"parameters); what would separate it: {separation[verdict]['would_separate']}"
+        )
+        report["verdict_confidence_of"] = "presence"
+    report["honesty"] = {
+        "residue_tests": residues,
+        "possible_residue": [r["effect"] for r in residues if r["possible_residue"]],
+        "fell_back": fell_back,
+        "withdrawn": withdrawn,
+        "statement": (
+            "the selected model was worse on the held-out blocks than the calibration alone: "
+            f"{', '.join(withdrawn)} withdrawn"
+            if fell_back
+            else "the final model is no worse than the calibration alone on the held-out blocks"
+        ),
+    }
+    return report
+
+
+def reviewed(data: DiagnosisData, att: Attribution) -> Attribution:
+    """``att`` with the selection, verdict and final model of :func:`review` (for benchmarks
+    that score the attribution without building the report)."""
+    import dataclasses
+
+    rv = review(data, att)
+    if rv.keep == list(att.selected):
+        return att
+    return dataclasses.replace(
+        att,
+        selected=list(rv.keep),
+        verdict=rv.keep[0] if rv.keep else "none",
+        final_rms_nt=rv.final.rms_nt,
+        final_residual_nt=rv.final.residual_nt,
+    )

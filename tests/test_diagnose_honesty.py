@@ -1,0 +1,264 @@
+"""Issue 25: the report's claims checked on the held-out data (:mod:`orbitcal.diagnose.honesty`).
+
+Small synthetic arrays (no orbit, no field model): a smooth 'reference field', white noise, and
+fields whose shape is known, so that each rule is exercised on a case where the answer is known.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+
+from orbitcal.diagnose.attribution import Attribution, JointFit, fit_joint, time_blocks
+from orbitcal.diagnose.bounds import param_range
+from orbitcal.diagnose.effects import DesignBlock, DiagnosisData
+from orbitcal.diagnose.honesty import (
+    GAP_TIMES_NOISE,
+    _bound_limited,
+    noise_floor_nt,
+    residue_test,
+    review,
+)
+from orbitcal.metrics import norm_rms_nt
+
+N = 3000
+CADENCE_S = 10.0
+
+
+def _reference(t: np.ndarray) -> np.ndarray:
+    w = 2 * np.pi / 5650.0
+    return np.column_stack(
+        [
+            20000.0 * np.cos(w * t),
+            15000.0 * np.sin(w * t + 0.3),
+            30000.0 * np.cos(2 * w * t + 1.0) + 5000.0,
+        ]
+    )
+
+
+def _data(raw: np.ndarray, t: np.ndarray, ref: np.ndarray) -> DiagnosisData:
+    eye = np.broadcast_to(np.eye(3), (t.size, 3, 3)).copy()
+    r = np.column_stack([6800.0 * np.cos(t / 900.0), 6800.0 * np.sin(t / 900.0), np.zeros(t.size)])
+    return DiagnosisData(
+        t_utc_s=t, b_raw_nt=raw, b_ref_body_nt=ref, rot_itrs_to_body=eye, r_itrs_km=r
+    )
+
+
+def _fit(data: DiagnosisData, train: np.ndarray, fields: list[np.ndarray]) -> JointFit:
+    blocks = [DesignBlock(f[:, :, None], [f"scale_{k}"]) for k, f in enumerate(fields)]
+    return fit_joint(data, train, blocks, robust=False, use_prior=False, bounded=False)
+
+
+def test_noise_floor_is_the_white_noise_under_slow_signals_spikes_and_gaps() -> None:
+    rng = np.random.default_rng(0)
+    t = np.arange(N) * CADENCE_S
+    noise = rng.normal(scale=2.0, size=(N, 3))
+    slow = 80.0 * np.sin(2 * np.pi * t / 5650.0)[:, None] * np.array([1.0, -0.5, 0.3])
+    r = noise + slow
+    r[rng.random(N) < 0.01] += 500.0  # spikes
+    mask = np.ones(N, dtype=bool)
+    mask[1000:1100] = False  # a gap
+    assert noise_floor_nt(r, mask) == pytest.approx(2.0, rel=0.1)
+    # A slow residual far above the noise: the floor stays at the noise, so the gap shows.
+    assert norm_rms_nt(r[mask]) / np.sqrt(3) / noise_floor_nt(r, mask) > 10 * GAP_TIMES_NOISE
+    assert np.isnan(noise_floor_nt(r[:5]))
+
+
+def test_intervals_reaching_a_physical_bound_are_marked() -> None:
+    rng = param_range("dt_s")
+    effect = {
+        "param_intervals_90": {
+            "dt_s": [rng.lower, 0.1],
+            "dt_squared_s2": [0.01, 0.02],
+        }
+    }
+    limited = _bound_limited(effect)
+    assert limited["dt_s"] is True
+    assert limited["dt_squared_s2"] is False
+
+
+def _two_effect_world(
+    third_is_real: bool,
+) -> tuple[DiagnosisData, JointFit, np.ndarray, np.ndarray]:
+    """Effect A's true field drifts in scale over the span (its template does not); the third
+    block is either the drift's look-alike (tau * f_A) or a field of its own (a square wave)."""
+    rng = np.random.default_rng(3)
+    t = np.arange(N) * CADENCE_S
+    ref = _reference(t)
+    tau = (t - t[0]) / (t[-1] - t[0]) - 0.5
+    f_a = 60.0 * np.column_stack([np.sin(t / 700.0), np.cos(t / 500.0), np.sin(t / 300.0 + 1.0)])
+    f_b = 40.0 * np.column_stack([np.cos(t / 1300.0 + 2.0), np.sin(t / 1700.0), np.zeros(N)])
+    square = 25.0 * np.sign(np.sin(2 * np.pi * t / 2000.0))[:, None] * np.array([1.0, 0.5, -1.0])
+    raw = ref + 50.0 + (1.0 + 0.6 * tau)[:, None] * f_a + f_b + rng.normal(scale=2.0, size=(N, 3))
+    third = square if third_is_real else tau[:, None] * f_a
+    if third_is_real:
+        raw = raw + square
+    data = _data(raw, t, ref)
+    train, holdout, _ = time_blocks(t)
+    return data, _fit(data, train, [f_a, f_b, third]), train, holdout
+
+
+def test_a_third_effect_that_only_takes_the_others_template_error_is_a_possible_residue() -> None:
+    data, fit, train, holdout = _two_effect_world(third_is_real=False)
+    res = residue_test(data, fit, 2, train, holdout, name="look-alike")
+    assert res.residue, res
+
+
+def test_a_third_effect_with_a_field_of_its_own_is_kept() -> None:
+    data, fit, train, holdout = _two_effect_world(third_is_real=True)
+    res = residue_test(data, fit, 2, train, holdout, name="square")
+    assert not res.residue, res
+    assert res.gain > 0.3
+
+
+def test_a_final_model_worse_than_the_calibration_alone_falls_back() -> None:
+    """A transient disturbance in the training blocks only, shaped like a steep regressor on them:
+    the regressor is fitted to it and extrapolates into the held-out blocks, where it is not."""
+    rng = np.random.default_rng(5)
+    t = np.arange(N) * CADENCE_S
+    ref = _reference(t)
+    train, holdout, _ = time_blocks(t)
+    tau = (t - t[0]) / (t[-1] - t[0])
+    steep = 400.0 * tau[:, None] ** 4 * np.array([1.0, -1.0, 0.5])
+    raw = ref + 20.0 + rng.normal(scale=2.0, size=(N, 3))
+    raw[train] += steep[train]  # seen in training only
+    data = _data(raw, t, ref)
+    base = fit_joint(data, train, [], robust=False, use_prior=False)
+    r_base = raw - base.predict_nt(data)
+    final = _fit(data, train, [steep])
+    r_final = raw - final.predict_nt(data)
+    base_rms, final_rms = norm_rms_nt(r_base[holdout]), norm_rms_nt(r_final[holdout])
+    assert final_rms > 1.5 * base_rms  # the premise: the selection made it worse
+    att = Attribution(
+        baseline_rms_nt=base_rms,
+        baseline_train_rms_nt=norm_rms_nt(r_base[train]),
+        verdict="parameter_drift",
+        effects=[],
+        selected=["parameter_drift"],
+        final_rms_nt=final_rms,
+        train=train,
+        holdout=holdout,
+        baseline_residual_nt=r_base,
+        final_residual_nt=r_final,
+        fits={"baseline": base, "final": final},
+    )
+    rv = review(data, att)
+    assert rv.fell_back
+    assert rv.keep == [] and rv.withdrawn == ["parameter_drift"]
+    assert rv.final.rms_nt <= base_rms
+
+
+def test_a_span_shorter_than_an_orbit_holds_out_two_blocks_unless_told_otherwise() -> None:
+    from orbitcal.diagnose.span_options import SHORT_SPAN_HOLDOUT_BLOCKS, choose_options
+
+    rng = np.random.default_rng(2)
+    for n, cadence in ((1800, 1.0), (N, CADENCE_S)):  # 30 min at 1 Hz; 8.3 h at 10 s
+        t = np.arange(n) * cadence
+        ref = _reference(t)
+        data = _data(ref + rng.normal(scale=1.0, size=(n, 3)), t, ref)
+        options, why = choose_options(data, {})
+        if n * cadence < 5400.0:
+            assert options["holdout_blocks"] == SHORT_SPAN_HOLDOUT_BLOCKS
+            assert any("shorter than an orbit" in w for w in why)
+            # A choice the caller made is kept.
+            assert choose_options(data, {"holdout_blocks": 3})[0]["holdout_blocks"] == 3
+        else:
+            assert options == {} and why == []
+
+
+def _null_attribution(
+    slow_nt: float,
+) -> tuple[DiagnosisData, Attribution]:
+    """Nothing selected; the residual holds white noise of 2 nT and a slow field of ``slow_nt``."""
+    rng = np.random.default_rng(8)
+    t = np.arange(N) * CADENCE_S
+    ref = _reference(t)
+    slow = slow_nt * np.column_stack(
+        [np.sin(t / 2100.0), np.cos(t / 1700.0), np.sin(t / 2900.0 + 1.0)]
+    )
+    raw = ref + 30.0 + slow + rng.normal(scale=2.0, size=(N, 3))
+    data = _data(raw, t, ref)
+    train, holdout, _ = time_blocks(t)
+    base = fit_joint(data, train, [], robust=False, use_prior=False)
+    r = raw - base.predict_nt(data)
+    rms = norm_rms_nt(r[holdout])
+    att = Attribution(
+        baseline_rms_nt=rms,
+        baseline_train_rms_nt=norm_rms_nt(r[train]),
+        verdict="none",
+        effects=[],
+        selected=[],
+        final_rms_nt=rms,
+        train=train,
+        holdout=holdout,
+        baseline_residual_nt=r,
+        final_residual_nt=r,
+        fits={"baseline": base, "final": base},
+        verdict_confidence=0.99,
+    )
+    return data, att
+
+
+def _report(att: Attribution, verdict: str, confidence: float | None) -> dict[str, Any]:
+    rms = att.baseline_rms_nt / np.sqrt(3.0)
+    return {
+        "verdict": verdict,
+        "verdict_confidence": confidence,
+        "verdict_status": "",
+        "separation": [
+            {"effect": "time_offset", "absorbed_fraction": 1.0, "would_separate": "a prior"}
+        ],
+        "effects": [
+            {
+                "name": "time_offset",
+                "significant": verdict == "time_offset",
+                "status": "selected" if verdict == "time_offset" else "not significant",
+                "holdout_rms_after_nt": rms,
+                "shrink": 1.0,
+                "p_value": 0.5,
+                "param_intervals_90": {"dt_s": [-5.0, 0.2]},
+                "absorbed_by_calibration_fraction": 0.999,
+            }
+        ],
+        "final": {"effects": [], "holdout_rms_nt": rms, "where": None},
+        "where": {"concentration": "|mlat| 0-30 deg", "axis_rms_nt": [1.0, 1.0, 1.0]},
+        "data": {},
+    }
+
+
+def test_none_far_above_the_noise_is_an_unexplained_gap_with_its_candidates() -> None:
+    from orbitcal.diagnose.honesty import review_report
+
+    data, att = _null_attribution(slow_nt=40.0)
+    report = review_report(_report(att, "none", 0.99), data, att)
+    gap = report["gap"]
+    assert gap["unexplained"] and gap["times_noise"] > 5.0
+    assert gap["noise_floor_nt"] == pytest.approx(2.0, rel=0.15)
+    assert report["verdict_confidence"] is None  # no confidence in "none" beside such a gap
+    assert report["verdict_status"].startswith("none: an unexplained gap")
+    (closest,) = gap["closest_candidates"]
+    assert closest["refused_because"].startswith("absorbed by the calibration")
+    assert any("prior calibration" in w for w in gap["would_decide"])
+    assert report["effects"][0]["param_bound_limited"] == {"dt_s": True}
+    assert report["effects"][0]["bound_limited"] is True
+    # At the noise floor, "none" says so.
+    data, att = _null_attribution(slow_nt=0.0)
+    report = review_report(_report(att, "none", 0.99), data, att)
+    assert not report["gap"]["unexplained"]
+    assert report["verdict_status"] == "none: at the noise floor"
+
+
+def test_a_verdict_not_separable_and_unstable_says_both() -> None:
+    from orbitcal.diagnose.honesty import review_report
+
+    data, att = _null_attribution(slow_nt=0.0)
+    report = review_report(_report(att, "time_offset", 0.0), data, att)
+    assert report["separable"] is False
+    status = report["verdict_status"]
+    assert "wins only 0% of the resamples" in status and "is present" not in status
+    assert "cannot be separated from the calibration" in status
+    report = review_report(_report(att, "time_offset", 1.0), data, att)
+    assert report["verdict_status"].startswith("tentative: time_offset is present (confidence 100%")
+    assert report["verdict_confidence_of"] == "presence"
