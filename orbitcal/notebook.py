@@ -8,7 +8,7 @@ indexed by UTC time. xarray is optional: ``to_xarray`` says how to install it wh
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeAlias
 
 import numpy as np
 
@@ -17,9 +17,11 @@ from orbitcal.arrays import FloatArray
 if TYPE_CHECKING:
     import pandas as pd
 
-    from orbitcal.pipeline import CalibrationRun
-    from orbitcal.telemetry import Telemetry
-    from orbitcal.truth import Truth
+# The objects are taken as ``Any`` (duck-typed: Telemetry, Truth, CalibrationRun): this module sits
+# below the packages whose objects it shows, so that it imports none of them (no import cycle).
+Telemetry: TypeAlias = Any
+Truth: TypeAlias = Any
+CalibrationRun: TypeAlias = Any
 
 __all__ = [
     "frame_to_xarray",
@@ -109,15 +111,15 @@ def truth_frame(truth: Truth) -> pd.DataFrame:
     return pd.DataFrame(data, index=time_index(truth.t_utc_s))
 
 
-def run_frame(run: CalibrationRun) -> pd.DataFrame:
-    """Per sample by UTC time: ``held_out`` (a row no fit saw), the raw and calibrated field, the
-    reference and the residual, body frame [nT] (``residual_{x,y,z}_nt`` only with attitude),
-    and ``scalar_residual_nt`` (``|b_cal| − |B_ref|``)."""
+def run_frame(
+    run: CalibrationRun, b_cal: FloatArray, res: FloatArray | None, scalar: FloatArray
+) -> pd.DataFrame:
+    """Per sample by UTC time: ``held_out`` (a row no fit saw), the raw and calibrated field
+    ``b_cal``, the residual ``res``, body frame [nT] (``residual_{x,y,z}_nt`` only with
+    attitude), and ``scalar_residual_nt`` (``|b_cal| − |B_ref|``), as
+    :func:`orbitcal.pipeline.residuals` gives them."""
     import pandas as pd
 
-    from orbitcal.pipeline import residuals
-
-    b_cal, res, scalar = residuals(run.document, run.truth)
     data: dict[str, Any] = {"held_out": np.asarray(run.holdout, dtype=bool)}
     data.update(_columns("b_raw", run.telemetry.b_raw_nt, "xyz", "nt"))
     data.update(_columns("b_cal", b_cal, "xyz", "nt"))

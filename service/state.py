@@ -24,7 +24,6 @@ from service.diagnosis_cache import DiagnosisCache
 if TYPE_CHECKING:
     from sqlalchemy.engine import Engine
 
-    from service.auth import Principal
     from service.jobs import JobRunner
     from service.metrics import Metrics
     from service.ratelimit import Buckets
@@ -41,8 +40,9 @@ class ServiceState(State):
     settings: Settings
     admin_key_hash: str | None
     rate_limit_store: Buckets
-    #: key hash -> (principal or None for unknown/revoked, monotonic expiry)
-    key_cache: dict[str, tuple[Principal | None, float]]
+    #: key hash -> (service.auth.Principal, or None for unknown/revoked; monotonic expiry); typed
+    #: loosely so that this module imports nothing of auth (which reads the state: no cycle)
+    key_cache: dict[str, tuple[Any, float]]
     key_lock: asyncio.Lock
     #: spacecraft id -> the served calibration's bytes (``routes.calibrations``)
     calibration_cache: dict[str, Any]

@@ -14,8 +14,8 @@ from test_diagnose_worlds import make_world
 from orbitcal.diagnose import CATALOGUE, EFFECT_NAMES, attribute
 from orbitcal.diagnose.api import diagnose_data
 from orbitcal.diagnose.attribution import split_fit_tests
+from orbitcal.diagnose.html_report import report_html
 from orbitcal.diagnose.options import AttributionOptions
-from orbitcal.diagnose.report import report_html
 
 pytestmark = pytest.mark.usefixtures("single_thread_blas")  # tests/conftest.py
 

@@ -247,7 +247,7 @@ def _same(documented: str, default: Any) -> bool:
     if isinstance(default, bool):
         return documented == str(default).lower()
     if isinstance(default, int | float):
-        units = {"MiB": 2**20}
+        units = {"KiB": 2**10, "MiB": 2**20}
         m = re.fullmatch(r"([\d.]+)(?: (\w+))?", documented)
         if m is None:
             return False

@@ -28,6 +28,7 @@ from orbitcal.calibrate.errors import (
     MissingAttitudeError,
     PoorCoverageError,
     TooFewSamplesError,
+    UndeterminedFitError,
     UnknownMethodError,
 )
 
@@ -49,6 +50,7 @@ __all__ = [
     "MissingAttitudeError",
     "PoorCoverageError",
     "TooFewSamplesError",
+    "UndeterminedFitError",
     "UnknownMethodError",
     "calibration_class",
     "fit_method",

@@ -14,6 +14,7 @@ __all__ = [
     "MissingAttitudeError",
     "PoorCoverageError",
     "TooFewSamplesError",
+    "UndeterminedFitError",
     "UnknownMethodError",
 ]
 
@@ -58,6 +59,22 @@ class PoorCoverageError(CalibrationError, NotEnoughDataError):
             f"{method}: poor attitude/field coverage leaves an axis unobservable "
             f"(condition number {condition_number:.3g} > {limit:.3g}); "
             "use data with more varied field directions in the sensor frame"
+        )
+
+
+class UndeterminedFitError(CalibrationError, NotEnoughDataError):
+    """The fit is well-conditioned numerically but the data do not determine the matrix: its
+    standard errors exceed what a calibration can be trusted with."""
+
+    def __init__(self, method: str, gain_sd: float, limit: float, n: int) -> None:
+        self.method = method
+        self.gain_sd = gain_sd
+        self.limit = limit
+        super().__init__(
+            f"{method}: the {n} samples determine the calibration matrix only to "
+            f"±{gain_sd:.3g} (1 sigma) per element, more than {limit:g}: the field barely "
+            "changed direction in the sensor frame; use a longer span (hours, several orbits) "
+            "or more varied attitudes"
         )
 
 

@@ -21,10 +21,12 @@ from orbitcal.calibrate.errors import (
     MissingAttitudeError,
     PoorCoverageError,
     TooFewSamplesError,
+    UndeterminedFitError,
 )
 
 __all__ = [
     "CONDITION_LIMIT",
+    "MAX_GAIN_SD",
     "cramer_rao_bound",
     "design_matrix",
     "equilibrated_condition_number",
@@ -36,6 +38,12 @@ __all__ = [
 # Largest accepted condition number of the column-equilibrated design matrix. Beyond it one
 # direction of the parameter space is determined by < 1e-6 of the data's leverage.
 CONDITION_LIMIT = 1e6
+#: Largest standard error of an element of ``A`` (and so of ``M``) a fit may leave [-]: 0.02 is
+#: ±1,000 nT of field error at 50,000 nT. A design can be well-conditioned numerically yet leave
+#: ``A`` undetermined when the field barely turns in the sensor frame: 49 s of real GRACE-FO data
+#: (condition 1.9e5) give standard errors up to 5; 5 min of nadir pointing at 20 nT noise 0.5;
+#: 1,000 s of nadir 0.005; a day at 10 s ~1e-4 (issue 22).
+MAX_GAIN_SD = 0.02
 
 
 def design_matrix(b_ref_body_nt: FloatArray, x_hk: FloatArray | None = None) -> FloatArray:
@@ -104,6 +112,9 @@ def fit_linear(data: FitData, *, use_hk: bool = False) -> AffineCalibration:
     resid = fit_data.b_raw_nt - X @ coef
     dof = max(1, X.shape[0] - X.shape[1])
     sigma = float(np.sqrt(np.sum(resid**2) / (3 * dof)))
+    gain_sd = _gain_standard_error(X, sigma)
+    if not gain_sd <= MAX_GAIN_SD:
+        raise UndeterminedFitError(method, gain_sd, MAX_GAIN_SD, int(X.shape[0]))
     return AffineCalibration(
         method,
         np.asarray(np.linalg.inv(A), dtype=np.float64),
@@ -117,6 +128,18 @@ def fit_linear(data: FitData, *, use_hk: bool = False) -> AffineCalibration:
             "condition_number": equilibrated_condition_number(X),
         },
     )
+
+
+def _gain_standard_error(X: FloatArray, sigma_nt: float) -> float:
+    """Largest standard error of the ``A`` columns' coefficients of ``X`` [-]: ``sigma ·
+    sqrt(diag((XᵀX)⁻¹))`` over the three field columns (the same for every output axis)."""
+    _, r = np.linalg.qr(X)
+    try:
+        r_inv = np.linalg.inv(r)
+    except np.linalg.LinAlgError:
+        return float("inf")
+    var_unit = np.sum(r_inv[:3, :] ** 2, axis=1)
+    return float(sigma_nt * np.sqrt(np.max(var_unit)))
 
 
 def fit_linear_batch(X: FloatArray, b_raw_nt: FloatArray) -> tuple[FloatArray, FloatArray]:

@@ -71,8 +71,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 def run(args: argparse.Namespace) -> int:
     """Execute ``orbitcal diagnose``; bad input raises CliError or an OrbitcalError (exit != 0)."""
     from orbitcal.diagnose.api import diagnose
+    from orbitcal.diagnose.html_report import report_html
     from orbitcal.diagnose.options import DiagnosisOptions
-    from orbitcal.diagnose.report import report_html
     from orbitcal.field import get_field
     from orbitcal.memory import release_freed_arrays, trim_heap
 

@@ -16,8 +16,9 @@ if TYPE_CHECKING:
     from orbitcal.diagnose.api import diagnose, diagnose_data, diagnosis_data
     from orbitcal.diagnose.attribution import Attribution, EffectScore, SplitFit, attribute
     from orbitcal.diagnose.effects import CATALOGUE, EFFECT_NAMES, DiagnosisData, Effect
+    from orbitcal.diagnose.html_report import report_html
     from orbitcal.diagnose.options import AttributionOptions, DiagnosisOptions
-    from orbitcal.diagnose.report import build_report, report_html
+    from orbitcal.diagnose.report import build_report
     from orbitcal.diagnose.result import Diagnosis, Report
 
 # Imported on first access (scipy and the engine are heavy; ``orbitcal diagnose --help`` needs
@@ -31,7 +32,8 @@ _EXPORTS = {
         ("CATALOGUE", "EFFECT_NAMES", "DiagnosisData", "Effect"), "orbitcal.diagnose.effects"
     ),
     **dict.fromkeys(("AttributionOptions", "DiagnosisOptions"), "orbitcal.diagnose.options"),
-    **dict.fromkeys(("build_report", "report_html"), "orbitcal.diagnose.report"),
+    "build_report": "orbitcal.diagnose.report",
+    "report_html": "orbitcal.diagnose.html_report",
     **dict.fromkeys(("Diagnosis", "Report"), "orbitcal.diagnose.result"),
 }
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())

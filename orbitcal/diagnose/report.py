@@ -5,8 +5,8 @@ JSON keys of section 5 are written exactly: ``baseline {method, holdout_rms_nt}`
 (ranked, most explanatory first) and ``where {axis_rms_nt, ...}``. Supporting sections are added
 around them (``final``, ``split_fits``, ``learned``, ``data``).
 
-The HTML page is drawn from this JSON alone by :mod:`orbitcal.diagnose.html_report` (re-exported
-here as ``report_html``), so the command line and the service render the same page.
+The HTML page is drawn from this JSON alone by :mod:`orbitcal.diagnose.html_report`
+(``report_html``), so the command line and the service render the same page.
 """
 
 from __future__ import annotations
@@ -18,9 +18,8 @@ import numpy as np
 
 from orbitcal.diagnose.attribution import Attribution
 from orbitcal.diagnose.effects import EFFECT_NAMES, DiagnosisData, get_effect
-from orbitcal.diagnose.html_report import report_html
 
-__all__ = ["BASELINE_METHOD", "build_report", "report_html"]
+__all__ = ["BASELINE_METHOD", "build_report"]
 
 
 #: Name of the baseline calibration in the report.

@@ -76,8 +76,9 @@ class CalibrationRun:
         """Per sample by UTC time: held out or not, raw, calibrated, residual [nT]
         (:func:`orbitcal.notebook.run_frame`)."""
         from orbitcal.notebook import run_frame
+        from orbitcal.pipeline.scores import residuals
 
-        return run_frame(self)
+        return run_frame(self, *residuals(self.document, self.truth))
 
     def to_xarray(self) -> Any:
         """:meth:`to_frame` as an xarray Dataset (needs the optional xarray)."""

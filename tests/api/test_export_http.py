@@ -129,8 +129,8 @@ def test_dashboard_downloads(served: Served, tmp_path: Path) -> None:
         browser.navigate(served.server.url + "/dashboard")
         assert browser.wait_for("document.body.dataset.ready") == "needs-key"
         browser.evaluate(f"localStorage.setItem('orbitcal.apiKey', {json.dumps(ADMIN_KEY)})")
-        browser.navigate(served.server.url + "/dashboard#sc=swarm-a")
-        assert browser.wait_for("document.body.dataset.ready") == "swarm-a"
+        browser.navigate(served.server.url + "/dashboard#sc=swarm-a")  # a hash change: no reload
+        assert browser.wait_for("document.body.dataset.ready === 'swarm-a'")
         formats = browser.evaluate(
             "[...document.querySelectorAll('#cal-downloads button')].map(b => b.dataset.format)"
         )

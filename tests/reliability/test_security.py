@@ -87,6 +87,7 @@ ROUTES: list[Route] = [
     ("POST", "/v1/spacecraft/{spacecraft_id}/calibrations", INGEST, lambda ids: {}),
     ("GET", "/v1/spacecraft/{spacecraft_id}/calibrations", READ, lambda ids: {}),
     ("GET", "/v1/spacecraft/{spacecraft_id}/calibration", READ, lambda ids: {}),
+    ("GET", "/v1/spacecraft/{spacecraft_id}/calibrations/{version}", READ, lambda ids: {}),
     ("GET", "/v1/spacecraft/{spacecraft_id}/residuals", READ, lambda ids: {}),
     ("GET", "/v1/spacecraft/{spacecraft_id}/activity", READ, lambda ids: {}),
     (
@@ -111,6 +112,7 @@ ROUTES: list[Route] = [
     ("GET", "/v1/spacecraft/{spacecraft_id}/data-audit", READ, lambda ids: {}),
     ("GET", "/v1/spacecraft/{spacecraft_id}/diagnosis/report.html", READ, lambda ids: {}),
     ("GET", "/v1/spacecraft/{spacecraft_id}/diagnosis", READ, lambda ids: {}),
+    ("GET", "/v1/spacecraft/{spacecraft_id}/diagnosis/latest", READ, lambda ids: {}),
     ("GET", "/v1/jobs/{job_id}", READ, lambda ids: {}),
     ("POST", "/v1/keys", ADMIN, lambda ids: {"json": {"name": "m", "scopes": ["read:sat-1"]}}),
     ("GET", "/v1/keys", ADMIN, lambda ids: {}),
@@ -183,6 +185,7 @@ def test_scope_matrix_hashed_keys_and_no_secret_in_logs(
             "job_id": job_id,
             "prefix": "ock_nosuchkey",
             "quarantine_id": "999999",
+            "version": "1",
         }
         matrix = _run_matrix(server, keys, ids)
     # Every documented operation is in the matrix.
