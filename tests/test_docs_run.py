@@ -162,7 +162,13 @@ def test_readme_first_session_notebook_and_http_run(
         )  # fmt: skip
         assert proc.returncode == 0, (line, proc.stdout[-2000:], proc.stderr[-2000:])
         ran.append((line, proc.stdout))
-    assert len(ran) == 6
+    assert len(ran) == 8
+    # the exports and the ingest lines wrote what they say
+    assert "http://www.omg.org/spec/XTCE/20180204" in (tmp_path / "mag.xml").read_text()
+    import pandas as pd
+
+    table = pd.read_csv(tmp_path / "gracefo.csv")
+    assert len(table) == 100 and {"time", "b_x", "q_w", "r_x"} <= set(table.columns)
     # the comments' claims: a 0.5 s time-tag error, named by the diagnosis
     report = json.loads((tmp_path / "report.json").read_text())
     assert report["verdict"] == "time_offset"
