@@ -262,3 +262,103 @@ def test_a_verdict_not_separable_and_unstable_says_both() -> None:
     report = review_report(_report(att, "time_offset", 1.0), data, att)
     assert report["verdict_status"].startswith("tentative: time_offset is present (confidence 100%")
     assert report["verdict_confidence_of"] == "presence"
+
+
+def _stand_in_attribution(
+    slow_nt: float, *, extra: list[tuple[str, float, float]] = ()
+) -> tuple[DiagnosisData, Attribution]:
+    """One selected effect whose field is almost all a change of scale (what the 12 parameters
+    reproduce), ``time_offset``, beside an unmodelled slow field of ``slow_nt``. ``extra`` adds
+    candidates that were not selected: (name, absorbed fraction, held-out RMS after)."""
+    from orbitcal.diagnose.attribution import EffectScore
+
+    rng = np.random.default_rng(11)
+    t = np.arange(N) * CADENCE_S
+    ref = _reference(t)
+    slow = slow_nt * np.column_stack(
+        [np.sin(t / 2100.0), np.cos(t / 1700.0), np.sin(t / 2900.0 + 1.0)]
+    )
+    own = 2e-3 * ref + 0.8 * np.column_stack([np.sin(t / 300.0)] * 3)  # scale + a small own part
+    raw = ref + 30.0 + slow + own + rng.normal(scale=2.0, size=(N, 3))
+    data = _data(raw, t, ref)
+    train, holdout, _ = time_blocks(t)
+    base = fit_joint(data, train, [], robust=False, use_prior=False)
+    r_base = raw - base.predict_nt(data)
+    final = _fit(data, train, [own])
+    r_final = raw - final.predict_nt(data)
+    base_rms, final_rms = norm_rms_nt(r_base[holdout]), norm_rms_nt(r_final[holdout])
+    f = final.effect_nt(0)[train]
+    q, _ = np.linalg.qr(np.column_stack([ref[train], np.ones(int(train.sum()))]))
+    absorbed = float(np.sum((q @ (q.T @ f)) ** 2) / np.sum(f * f))
+    effects = [
+        EffectScore(
+            "time_offset", True, base_rms, final_rms, 1e-6, {}, step=1, absorbed_fraction=absorbed
+        )
+    ] + [EffectScore(n, False, base_rms, rms, 0.5, {}, absorbed_fraction=a) for n, a, rms in extra]
+    att = Attribution(
+        baseline_rms_nt=base_rms,
+        baseline_train_rms_nt=norm_rms_nt(r_base[train]),
+        verdict="time_offset",
+        effects=effects,
+        selected=["time_offset"],
+        final_rms_nt=final_rms,
+        train=train,
+        holdout=holdout,
+        baseline_residual_nt=r_base,
+        final_residual_nt=r_final,
+        fits={"baseline": base, "final": final},
+    )
+    return data, att
+
+
+def test_an_effect_the_calibration_absorbs_beside_an_unexplained_gap_is_not_named() -> None:
+    """Issue 25 (nadir on the real storm pass): >= 99 % of the effect's field is a change of the
+    12 parameters and what is left of it is smaller than the unexplained held-out residual --
+    the held-out blocks cannot tell it from the calibration, so it is withdrawn and the verdict
+    says so, naming it."""
+    from orbitcal.diagnose.honesty import INSEPARABLE_LIMIT, review_report
+
+    data, att = _stand_in_attribution(slow_nt=40.0)
+    assert att.effects[0].absorbed_fraction >= INSEPARABLE_LIMIT  # the premise
+    rv = review(data, att)
+    assert rv.inseparable == ["time_offset"] and rv.keep == [] and rv.verdict == "none"
+    report = review_report(_report(att, "time_offset", 1.0), data, att, rv=rv)
+    assert report["verdict"] == "none" and report["verdict_confidence"] is None
+    status = report["verdict_status"]
+    assert "cannot be separated from the calibration on this span" in status
+    assert "time_offset" in status and "prior calibration" in status
+    assert report["effects"][0]["status"] == "inseparable"
+    assert not report["effects"][0]["significant"]
+
+
+def test_an_absorbed_effect_whose_own_part_stands_above_the_residual_stays_named() -> None:
+    """The same effect with nothing unmodelled beside it: the residual is at the noise floor and
+    the part of its field the calibration cannot take stands above it (a clean world)."""
+    data, att = _stand_in_attribution(slow_nt=0.0)
+    rv = review(data, att)
+    assert rv.inseparable == [] and rv.keep == ["time_offset"]
+    assert rv.verdict == "time_offset"
+
+
+def test_a_selection_overshadowed_by_an_inseparable_candidate_is_withdrawn() -> None:
+    """A candidate the span cannot tell from the calibration explains the held-out residual far
+    better than the selected effect: the selection cannot be named either."""
+    from orbitcal.diagnose.honesty import OVERSHADOW_RATIO
+
+    data, att = _stand_in_attribution(slow_nt=0.0)
+    better = att.final_rms_nt / (2.0 * OVERSHADOW_RATIO)
+    data, att = _stand_in_attribution(
+        slow_nt=40.0, extra=[("sun_driven", 0.999, better), ("nonlinearity", 0.5, better)]
+    )
+    import dataclasses
+
+    # The selected effect is made separable (absorbed 0.5) so that only the overshadowing acts.
+    att = dataclasses.replace(
+        att, effects=[dataclasses.replace(att.effects[0], absorbed_fraction=0.5), *att.effects[1:]]
+    )
+    rv = review(data, att)
+    assert rv.inseparable == [] and rv.overshadowed == ["time_offset"]
+    assert rv.keep == [] and rv.verdict == "none"
+    from orbitcal.diagnose.honesty import inseparable_candidates
+
+    assert inseparable_candidates(att) == ["sun_driven"]  # a separable candidate is not listed

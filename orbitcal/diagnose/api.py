@@ -189,11 +189,12 @@ def _run(
     document = build_report(data, att, where, learned=learned_result, where_final=where_final)
     # Issue 25: the report's claims checked on the held-out data (orbitcal.diagnose.honesty):
     # possible residues, a fall-back when the final model is worse than the baseline, the gap.
-    from orbitcal.diagnose.honesty import review_report, reviewed
+    from orbitcal.diagnose.honesty import review, review_report, reviewed
 
-    final_att = reviewed(data, att)
+    rv = review(data, att)
+    final_att = reviewed(data, att, rv)
     document["evidence"] = evidence(data, final_att)  # curves the HTML page draws (evidence.py)
-    document = review_report(document, data, att, chosen=chosen)
+    document = review_report(document, data, att, chosen=chosen, rv=rv)
     return Diagnosis(report=Report.from_json(document), attribution=final_att, data=data)
 
 

@@ -27,7 +27,7 @@ against the same held-out data, and says so where a claim does not hold:
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -43,6 +43,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "GAP_TIMES_NOISE",
+    "INSEPARABLE_LIMIT",
     "ResidueResult",
     "noise_floor_nt",
     "residue_test",
@@ -65,6 +66,18 @@ RESIDUE_CHUNKS = 16
 FLEXIBLE = frozenset({"attitude_error", "sun_driven", "magnetorquer", "nonlinearity"})
 #: Effects judged by their own tests, not by the held-out blocks (never demoted here).
 OWN_TEST = frozenset({"field_aligned_currents"})
+#: Share of an effect's fitted field (training energy) that a change of the 12 calibration
+#: parameters reproduces, at or above which the span cannot tell the effect from the calibration
+#: at all (issue 25): what is left of its field is <= 10 % in amplitude, and its held-out gain then
+#: measures how it changes the calibration's extrapolation, not its own shape. Under nadir
+#: pointing on the real Swarm storm pass every candidate but the crust reaches 0.985-1.0 (a
+#: uniform external field, a time shift, a drift and a stray field all look like a change of
+#: scale and offset there), so none of them can be named.
+INSEPARABLE_LIMIT = 0.99
+RESIDUE_BESIDE_CURRENTS = True
+#: A candidate the span cannot tell from the calibration that leaves less than 1 / this of the
+#: selected model's held-out residual overshadows the selection (:func:`_overshadowed`).
+OVERSHADOW_RATIO = 2.0
 #: What data would decide, beyond the closest candidates' own needs.
 GENERAL_DECIDERS = (
     "a prior calibration (orbitcal diagnose --calibration CAL.json)",
@@ -168,6 +181,16 @@ def residue_test(
             scale = np.maximum(np.sqrt(np.mean(x[train] ** 2, axis=0)), 1e-12)
             coef, *_ = np.linalg.lstsq(x[train] / scale, y[train, i], rcond=None)
             out[:, i] = y[:, i] - (x / scale) @ coef
+    rms0, rms1, p, gain = _held_out_gain(r_without, r_with, holdout)
+    residue = bool(not (np.isfinite(p) and p < RESIDUE_ALPHA) or gain < RESIDUE_MIN_GAIN)
+    return ResidueResult(name, rms0, rms1, float(p), residue)
+
+
+def _held_out_gain(
+    r_without: FloatArray, r_with: FloatArray, holdout: BoolArray
+) -> tuple[float, float, float, float]:
+    """Held-out RMS without and with, the one-sided signed-rank p of the per-chunk log ratio of
+    their mean squares (:data:`RESIDUE_CHUNKS` consecutive chunks) and the relative gain."""
     rms0 = norm_rms_nt(r_without[holdout])
     rms1 = norm_rms_nt(r_with[holdout])
     e0 = np.sum(r_without[holdout] ** 2, axis=1)
@@ -175,9 +198,34 @@ def residue_test(
     parts = [c for c in np.array_split(np.arange(e0.size), RESIDUE_CHUNKS) if c.size]
     d = np.array([np.log(max(e0[c].mean(), 1e-300) / max(e1[c].mean(), 1e-300)) for c in parts])
     p = signed_rank_greater_p(d) if d.size else float("nan")
-    gain = 1.0 - rms1 / max(rms0, 1e-12)
-    residue = bool(not (np.isfinite(p) and p < RESIDUE_ALPHA) or gain < RESIDUE_MIN_GAIN)
-    return ResidueResult(name, rms0, rms1, float(p), residue)
+    return rms0, rms1, float(p), 1.0 - rms1 / max(rms0, 1e-12)
+
+
+def _still_significant(
+    data: DiagnosisData,
+    att: Attribution,
+    fit_names: Sequence[str],
+    keep: list[str],
+    final: _Final,
+) -> tuple[list[str], _Final, list[str]]:
+    """After effects were withdrawn, every remaining effect with a field must still shrink the
+    held-out residual significantly beside the others that remain (drop-one, the residue test's
+    level and least gain); one that does not was significant only beside a withdrawn one.
+    Returns the effects kept, their final model and the effects withdrawn here."""
+    orphaned: list[str] = []
+    changed = True
+    while changed:
+        changed = False
+        for name in [n for n in keep[::-1] if n not in OWN_TEST]:
+            without = _refit(data, att, fit_names, [n for n in keep if n != name])
+            _, _, p, gain = _held_out_gain(without.residual_nt, final.residual_nt, att.holdout)
+            if not (np.isfinite(p) and p < RESIDUE_ALPHA) or gain < RESIDUE_MIN_GAIN:
+                keep = [n for n in keep if n != name]
+                final = without
+                orphaned.append(name)
+                changed = True
+                break
+    return keep, final, orphaned
 
 
 def _fit_names(att: Attribution) -> list[str]:
@@ -235,6 +283,8 @@ def _bound_limited(effect: dict[str, Any]) -> dict[str, bool]:
 
 
 def _refusal(e: dict[str, Any]) -> str:
+    if e.get("inseparable"):
+        return str(e.get("inseparable_reason"))
     if e.get("status") == "implausible":
         return f"implausible: {e.get('implausible_reason')}"
     if e.get("status") == "possible residue":
@@ -251,11 +301,25 @@ def _refusal(e: dict[str, Any]) -> str:
     )
 
 
+def _deciders(names: Sequence[str]) -> str:
+    """What data would tell ``names`` from the calibration, each idea once."""
+    from orbitcal.diagnose.report import SEPARATING_DATA
+
+    ideas: list[str] = ["a prior calibration (orbitcal diagnose --calibration CAL.json)"]
+    for n in names:
+        for part in SEPARATING_DATA.get(n, "").replace(" or ", ", ").split(", "):
+            part = part.strip()
+            if part and "prior calibration" not in part and part not in ideas:
+                ideas.append(part)
+    return "; ".join(ideas)
+
+
 def _gap(
     report: dict[str, Any],
     data: DiagnosisData,
     final: _Final,
     holdout: BoolArray,
+    inseparable: Sequence[str] = (),
 ) -> dict[str, Any]:
     from orbitcal.diagnose.report import SEPARATING_DATA
 
@@ -295,7 +359,17 @@ def _gap(
             for e in closest
         ],
         "would_decide": decide,
+        "inseparable": list(inseparable),
     }
+    if inseparable:
+        gap["inseparable_statement"] = (
+            f"the held-out residual ({rms:.3g} nT per component, {times:.1f} x the noise floor) "
+            "cannot be separated from the calibration on this span: "
+            + ", ".join(inseparable)
+            + f" would each shrink it, but >= {INSEPARABLE_LIMIT:.0%} of each one's fitted field "
+            "is a change of the 12 calibration parameters, so the held-out blocks cannot tell "
+            "which (if any) is present; what would decide: " + _deciders(inseparable)
+        )
     if unexplained:
         gap["statement"] = (
             f"an unexplained gap: the held-out residual is {rms:.3g} nT per component, "
@@ -328,6 +402,16 @@ class Review:
     fell_back : bool
     final : _Final
         The final model of ``keep`` (refitted when anything was removed).
+    inseparable : list of str
+        Selected effects withdrawn because the span cannot tell them from the calibration
+        (absorbed fraction >= :data:`INSEPARABLE_LIMIT`, no calibration prior).
+    orphaned : list of str
+        Effects withdrawn because, once others were withdrawn, they no longer shrink the
+        held-out residual significantly (:func:`_still_significant`).
+    gap_unexplained : bool
+        The final held-out residual is above :data:`GAP_TIMES_NOISE` times the noise floor.
+    verdict : str
+        The first effect of ``keep``, or ``"none"``.
     """
 
     keep: list[str]
@@ -335,13 +419,19 @@ class Review:
     withdrawn: list[str]
     fell_back: bool
     final: _Final
+    inseparable: list[str] = field(default_factory=list)
+    orphaned: list[str] = field(default_factory=list)
+    overshadowed: list[str] = field(default_factory=list)
+    gap_unexplained: bool = False
+    verdict: str = "none"
 
 
 def review(data: DiagnosisData, att: Attribution) -> Review:
     """The residue tests and the fall-back of :func:`review_report`, without the report."""
     fit_names = _fit_names(att)
     residues: list[dict[str, Any]] = []
-    keep = list(att.selected)
+    inseparable = inseparable_selected(data, att, fit_names)
+    keep = [n for n in att.selected if n not in inseparable]
     steps = {e.name: e.step for e in att.effects if e.significant}
     test_holdout, test_train = att.holdout, att.train
     # Beside auroral currents the attribution already judged every other effect on quiet
@@ -350,14 +440,14 @@ def review(data: DiagnosisData, att: Attribution) -> Review:
     currents = "field_aligned_currents" in att.selected
     regress = [n for n in fit_names if n not in OWN_TEST]
     if (
-        not currents
+        (not currents or RESIDUE_BESIDE_CURRENTS)
         and fit_names
         and len(regress) >= 2
         and int(test_holdout.sum()) >= 4 * RESIDUE_CHUNKS
     ):
         fit = att.fits["final"]
         for k, name in enumerate(fit_names):
-            if name not in FLEXIBLE or steps.get(name, 0) < 2:
+            if name not in FLEXIBLE or steps.get(name, 0) < 2 or name not in keep:
                 continue
             res = residue_test(data, fit, k, test_train, test_holdout, name=name)
             residues.append(
@@ -375,8 +465,14 @@ def review(data: DiagnosisData, att: Attribution) -> Review:
     final = _Final(
         list(att.selected), att.fits.get("final"), att.final_residual_nt, att.final_rms_nt
     )
+    orphaned: list[str] = []
     if keep != list(att.selected) and fit_names:
         final = _refit(data, att, fit_names, keep)
+        keep, final, orphaned = _still_significant(data, att, fit_names, keep, final)
+    overshadowed = _overshadowed(att, keep, final)
+    if overshadowed:
+        keep = [n for n in keep if n not in overshadowed]
+        final = _refit(data, att, fit_names, keep) if fit_names else final
     fell_back = False
     withdrawn: list[str] = []
     while final.rms_nt > att.baseline_rms_nt and keep and fit_names:
@@ -390,7 +486,111 @@ def review(data: DiagnosisData, att: Attribution) -> Review:
         keep = []
     if not keep and final.rms_nt > att.baseline_rms_nt:
         final = _Final([], att.fits.get("baseline"), att.baseline_residual_nt, att.baseline_rms_nt)
-    return Review(keep, residues, withdrawn, fell_back, final)
+    unexplained = gap_times_noise(final, att.holdout) > GAP_TIMES_NOISE
+    return Review(
+        keep,
+        residues,
+        withdrawn,
+        fell_back,
+        final,
+        inseparable=inseparable,
+        orphaned=orphaned,
+        overshadowed=overshadowed,
+        gap_unexplained=unexplained,
+        verdict=_verdict(keep),
+    )
+
+
+def _overshadowed(att: Attribution, keep: Sequence[str], final: _Final) -> list[str]:
+    """The kept effects with a field when a candidate the span cannot tell from the calibration
+    explains the held-out residual :data:`OVERSHADOW_RATIO` times better than their model: their
+    gain may be a fragment of the same misfit, so none of them can be named on this span."""
+    regress = [n for n in keep if n not in OWN_TEST]
+    if not regress:
+        return []
+    by_name = {e.name: e for e in att.effects}
+    best = [by_name[n].holdout_rms_after_nt for n in inseparable_candidates(att)]
+    if best and min(best) * OVERSHADOW_RATIO < final.rms_nt:
+        return regress
+    return []
+
+
+def inseparable_selected(
+    data: DiagnosisData, att: Attribution, fit_names: Sequence[str]
+) -> list[str]:
+    """Selected effects the span cannot tell from the calibration (no prior held it).
+
+    An effect is inseparable when at least :data:`INSEPARABLE_LIMIT` of its fitted field is a
+    change of the 12 parameters *and* the part that is not (per component, RMS over the
+    training samples) is smaller than what the final model leaves unexplained on the held-out
+    blocks above the noise floor: a remainder that small is what any unmodelled structure can
+    mimic. On a clean world the remainder of a real effect stands above a residual at the noise
+    floor and the effect stays named.
+    """
+    if att.has_prior:
+        return []
+    by_name = {e.name: e for e in att.effects}
+    fit = att.fits.get("final")
+    sigma = noise_floor_nt(att.final_residual_nt, att.holdout)
+    rms_pc = att.final_rms_nt / np.sqrt(3.0)
+    excess = float(np.sqrt(max(rms_pc**2 - sigma**2, 0.0))) if np.isfinite(sigma) else rms_pc
+    out = []
+    for n in att.selected:
+        a = by_name[n].absorbed_fraction if n in by_name else None
+        if n in OWN_TEST or a is None or float(a) < INSEPARABLE_LIMIT:
+            continue
+        remainder = 0.0
+        if fit is not None and n in fit_names:
+            f = fit.effect_nt(list(fit_names).index(n))[att.train]
+            remainder = float(np.sqrt(max(1.0 - float(a), 0.0) * np.mean(f * f)))
+        if remainder < excess:
+            out.append(n)
+    return out
+
+
+def inseparable_candidates(att: Attribution) -> list[str]:
+    """Every candidate the span cannot tell from the calibration whose fit shrinks the held-out
+    residual below the calibration's alone, best first (selected or not)."""
+    if att.has_prior:
+        return []
+    found = [
+        e
+        for e in att.effects
+        if e.name not in OWN_TEST
+        and e.absorbed_fraction is not None
+        and float(e.absorbed_fraction) >= INSEPARABLE_LIMIT
+        and e.holdout_rms_after_nt < att.baseline_rms_nt
+    ]
+    return [e.name for e in sorted(found, key=lambda e: e.holdout_rms_after_nt)]
+
+
+def absorbed_candidates(att: Attribution) -> list[str]:
+    """Every candidate (auroral currents aside) at least :data:`INSEPARABLE_LIMIT` of whose
+    fitted field is a change of the 12 parameters on this span, most absorbed first: what the
+    diagnosis cannot see here, whether or not it is present (none without a prior)."""
+    if att.has_prior:
+        return []
+    found = [
+        e
+        for e in att.effects
+        if e.name not in OWN_TEST
+        and e.absorbed_fraction is not None
+        and float(e.absorbed_fraction) >= INSEPARABLE_LIMIT
+    ]
+    return [e.name for e in sorted(found, key=lambda e: -float(e.absorbed_fraction or 0.0))]
+
+
+def gap_times_noise(final: _Final, holdout: BoolArray) -> float:
+    """The final held-out residual per component over its white-noise floor [-] (nan when the
+    floor cannot be estimated)."""
+    sigma = noise_floor_nt(final.residual_nt, holdout)
+    rms = final.rms_nt / np.sqrt(3.0)
+    return float(rms / sigma) if np.isfinite(sigma) and sigma > 0 else float("nan")
+
+
+def _verdict(keep: Sequence[str]) -> str:
+    """The first effect that stands, as the attribution ranked them, or ``"none"``."""
+    return keep[0] if keep else "none"
 
 
 #: As :data:`orbitcal.diagnose.report.FIRM_CONFIDENCE`: below it a verdict is not stable.
@@ -403,6 +603,7 @@ def review_report(
     att: Attribution,
     *,
     chosen: Sequence[str] = (),
+    rv: Review | None = None,
 ) -> dict[str, Any]:
     """Check the report's claims against the held-out data; returns the report with the
     ``gap``, ``separable`` and ``honesty`` sections added and any withdrawn claim marked.
@@ -421,7 +622,7 @@ def review_report(
         limited = _bound_limited(e)
         e["param_bound_limited"] = limited
         e["bound_limited"] = any(limited.values())
-    rv = review(data, att)
+    rv = rv if rv is not None else review(data, att)
     keep, final, holdout = rv.keep, rv.final, att.holdout
     residues, withdrawn, fell_back = rv.residues, rv.withdrawn, rv.fell_back
     for r in residues:
@@ -435,6 +636,38 @@ def review_report(
             "axis, a drift of it and a shift in time (their imperfect models), its field "
             f"shrinks the held-out residual by {r['gain']:.1%} (p = {r['p_value']:.2g}): "
             "what it takes may be what the others' templates miss"
+        )
+    for name in rv.inseparable:
+        e = by_name[name]
+        e["significant"] = False
+        e["status"] = "inseparable"
+    for name in inseparable_candidates(att):
+        e = by_name[name]
+        e["inseparable"] = True
+        e["inseparable_reason"] = (
+            "cannot be separated from the calibration on this span: "
+            f"{float(e.get('absorbed_by_calibration_fraction') or 1.0):.1%} of its fitted field "
+            "is a change "
+            "of the 12 parameters, so its held-out gain says how it moves the calibration's "
+            "extrapolation, not that it is present"
+        )
+    for name in rv.overshadowed:
+        e = by_name[name]
+        e["significant"] = False
+        e["status"] = "overshadowed"
+        e["overshadowed_reason"] = (
+            "a candidate the span cannot tell from the calibration explains the held-out "
+            f"residual more than {OVERSHADOW_RATIO:g} x better than the model with it: its gain "
+            "may be a fragment of the same misfit"
+        )
+    for name in rv.orphaned:
+        e = by_name[name]
+        e["significant"] = False
+        e["status"] = "withdrawn"
+        e["withdrawn_reason"] = (
+            "significant only beside "
+            + ", ".join(rv.inseparable + [r["effect"] for r in residues if r["possible_residue"]])
+            + ": without them it no longer shrinks the held-out residual significantly"
         )
     for name in withdrawn:
         e = by_name[name]
@@ -459,21 +692,43 @@ def review_report(
             e for e in report["effects"] if e["name"] not in keep
         ]
         report["effects"] = ranked
-        new_verdict = keep[0] if keep else "none"
-        if new_verdict != report["verdict"]:
-            report["verdict"] = new_verdict
-            report["verdict_confidence"] = None
-    report["gap"] = _gap(report, data, final, holdout)
+    if changed and rv.verdict != report["verdict"]:
+        report["verdict"] = rv.verdict
+        report["verdict_confidence"] = None
+    report["gap"] = _gap(report, data, final, holdout, inseparable_candidates(att))
+    absorbed = absorbed_candidates(att)
+    report["gap"]["absorbed_by_calibration"] = absorbed
+    unseen = (
+        "; the calibration takes up "
+        + ", ".join(absorbed)
+        + f" whole on this span (>= {INSEPARABLE_LIMIT:.0%} of each one's fitted field is a "
+        "change of the 12 parameters): if present, they cannot be separated from the "
+        "calibration on this span; what would decide: " + _deciders(absorbed)
+        if absorbed and not report["gap"]["inseparable"]
+        else ""
+    )
     separation = {s["effect"]: s for s in report.get("separation") or []}
     verdict = report["verdict"]
     report["separable"] = None if verdict == "none" else verdict not in separation
     conf = report.get("verdict_confidence")
     if verdict == "none":
-        if report["gap"]["unexplained"]:
+        if report["gap"]["unexplained"] and report["gap"]["inseparable"]:
             report["verdict_confidence"] = None
-            report["verdict_status"] = "none: " + report["gap"]["statement"]
+            report["verdict_status"] = "none: " + report["gap"]["inseparable_statement"]
+        elif report["gap"]["unexplained"]:
+            report["verdict_confidence"] = None
+            report["verdict_status"] = "none: " + report["gap"]["statement"] + unseen
         else:
-            report["verdict_status"] = "none: at the noise floor"
+            report["verdict_status"] = "none: at the noise floor" + unseen
+    elif verdict in OWN_TEST and report["gap"]["unexplained"] and report["gap"]["inseparable"]:
+        report["verdict_status"] = (
+            f"{verdict} on their own latitudes; beside them, "
+            + report["gap"]["inseparable_statement"]
+        )
+    elif verdict in OWN_TEST and unseen:
+        report["verdict_status"] = (
+            f"{report.get('verdict_status') or 'firm'}: {verdict} on their own latitudes" + unseen
+        )
     elif not report["separable"]:
         report["verdict_status"] = (
             (
@@ -495,6 +750,9 @@ def review_report(
     report["honesty"] = {
         "residue_tests": residues,
         "possible_residue": [r["effect"] for r in residues if r["possible_residue"]],
+        "inseparable": list(rv.inseparable),
+        "orphaned": list(rv.orphaned),
+        "overshadowed": list(rv.overshadowed),
         "fell_back": fell_back,
         "withdrawn": withdrawn,
         "statement": (
@@ -507,18 +765,18 @@ def review_report(
     return report
 
 
-def reviewed(data: DiagnosisData, att: Attribution) -> Attribution:
+def reviewed(data: DiagnosisData, att: Attribution, rv: Review | None = None) -> Attribution:
     """``att`` with the selection, verdict and final model of :func:`review` (for benchmarks
     that score the attribution without building the report)."""
     import dataclasses
 
-    rv = review(data, att)
-    if rv.keep == list(att.selected):
+    rv = rv if rv is not None else review(data, att)
+    if rv.keep == list(att.selected) and rv.verdict == att.verdict:
         return att
     return dataclasses.replace(
         att,
         selected=list(rv.keep),
-        verdict=rv.keep[0] if rv.keep else "none",
+        verdict=rv.verdict,
         final_rms_nt=rv.final.rms_nt,
         final_residual_nt=rv.final.residual_nt,
     )
