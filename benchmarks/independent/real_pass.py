@@ -51,14 +51,18 @@ def load_pass() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def judge(report: dict) -> dict:
     if "error" in report:
-        return {"verdict": "error", "ok": False, "detail": report["error"]}
+        return {"verdict": "error", "ok": False, "ok_or_explicit": False, "detail": report["error"]}
     sig = sorted(e["name"] for e in report["effects"] if e.get("significant"))
     gap = report.get("gap") or {}
     verdict = report["verdict"]
     honest_none = verdict == "none" and bool(gap.get("unexplained"))
     ok_verdict = verdict == "external_field"
     # "cannot be separated from the calibration on this span", naming external_field
-    named_absorbed = any(
+    status = str(report.get("verdict_status") or "")
+    named_absorbed = (
+        "cannot be separated from the calibration on this span" in status
+        and "external_field" in status
+    ) or any(
         c["name"] == "external_field" and "absorbed by the calibration" in c["refused_because"]
         for c in gap.get("closest_candidates", [])
     )
@@ -68,8 +72,11 @@ def judge(report: dict) -> dict:
         "confidence": report.get("verdict_confidence"),
         "significant": sig,
         "ok": bool(ok_verdict and set(sig) <= ALLOWED),
+        # "... or an explicit 'cannot be separated from the calibration on this span' naming it"
+        # (issue 25): beside a verdict of none, or of the auroral currents on their latitudes
         "ok_or_explicit": bool(
-            (ok_verdict or (honest_none and named_absorbed)) and set(sig) <= ALLOWED
+            (ok_verdict or ((honest_none or verdict in ALLOWED) and named_absorbed))
+            and set(sig) <= ALLOWED
         ),
         "only_allowed_significant": set(sig) <= ALLOWED,
         "none_with_gap": honest_none,
@@ -86,11 +93,14 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=2500)
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--attitudes", nargs="+", default=["tumbling", "nadir"])
+    ap.add_argument("--keep", type=Path, default=None, help="keep each table and report here")
     args = ap.parse_args()
     t, r, b_itrs = load_pass()
     rows = []
     t0 = time.time()
-    with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as tmp_dir:
+        tmp = args.keep if args.keep is not None else Path(tmp_dir)
+        tmp.mkdir(parents=True, exist_ok=True)
         for attitude in args.attitudes:
             for k in range(args.draws):
                 rng = np.random.default_rng([args.seed, k, attitude == "nadir"])
@@ -107,9 +117,9 @@ def main() -> None:
                     + sensor.offset_nt
                     + rng.normal(scale=sensor.noise_nt, size=b_body.shape)
                 )
-                table = Path(tmp) / f"pass_{attitude}_{k}.csv"
+                table = tmp / f"pass_{attitude}_{k}.csv"
                 write_table(table, t, raw, rot, r)
-                rep = run_cli(table, Path(tmp) / "report.json", frame="ITRS")
+                rep = run_cli(table, table.with_suffix(".json"), frame="ITRS")
                 row = {
                     "attitude": attitude,
                     "draw": k,

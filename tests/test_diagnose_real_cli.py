@@ -1,0 +1,104 @@
+"""Issue 25: the real Swarm A storm pass through ``orbitcal diagnose``, as a user runs it.
+
+The measured B_NEC of Swarm A (2016-01-01 00:00-00:30, a storm: ring current about -160 nT at low
+latitude, auroral currents; ``tests/authorities/test_fac_singlesat_swarm.nc4``) is turned into a
+section-1 table through a drawn sensor and a drawn attitude -- a tumble, and nadir pointing, under
+which a uniform external field is a change of scale the 12 parameters take whole -- and diagnosed
+by the command line with its defaults and no prior. The pass's effects are the external field and
+the auroral currents; nothing else may be called significant, the final model may never be worse
+than the calibration alone on the held-out blocks, and the verdict is the external field or an
+explicit "cannot be separated from the calibration on this span" naming it.
+
+The same construction with 20 draws of each attitude is ``benchmarks/independent/real_pass.py``
+(rates in ``benchmarks/results/diagnose_independent.md``); here two fixed draws of each.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from orbitcal import frames
+from orbitcal.cli import main
+
+AUTH = Path(__file__).parent / "authorities"
+SWARM_EPOCH_UTC_S = 1451606400.0  # 2016-01-01T00:00:00Z
+ALLOWED = {"external_field", "field_aligned_currents"}
+
+
+def _pass() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    with h5py.File(AUTH / "test_fac_singlesat_swarm.nc4") as f:
+        g = f["SW_OPER_MAGA_LR_1B"]
+        t = SWARM_EPOCH_UTC_S + g["Timestamp"][:].astype(float)
+        r = frames.spherical_to_itrs(
+            g["Radius"][:] / 1000.0, 90.0 - g["Latitude"][:], g["Longitude"][:]
+        )
+        b_itrs = frames.nec_to_itrs(np.asarray(g["B_NEC"][:], dtype=float), r)
+    return t, r, b_itrs
+
+
+def _attitude(kind: str, t: np.ndarray, r: np.ndarray, rng: np.random.Generator) -> Rotation:
+    """Body -> ITRS: a spin at 1 deg/s about a random axis, or LVLH (z to nadir, x along track)
+    with a mounting rotation of a few degrees."""
+    if kind == "tumbling":
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        spin = Rotation.from_rotvec(np.outer(np.radians(1.0) * (t - t[0]), axis))
+        return Rotation.random(random_state=int(rng.integers(1 << 31))) * spin
+    v = np.gradient(r, t, axis=0)
+    z = -r / np.linalg.norm(r, axis=1, keepdims=True)
+    y = np.cross(z, v)
+    y /= np.linalg.norm(y, axis=1, keepdims=True)
+    m = np.stack([np.cross(y, z), y, z], axis=2)
+    return Rotation.from_matrix(m) * Rotation.from_rotvec(np.radians(rng.uniform(-5, 5, size=3)))
+
+
+def _table(path: Path, kind: str, seed: int) -> None:
+    t, r, b_itrs = _pass()
+    rng = np.random.default_rng(seed)
+    a = np.eye(3) + rng.normal(scale=rng.uniform(0.005, 0.03), size=(3, 3))
+    offset = rng.uniform(50.0, 500.0, size=3) * rng.choice([-1.0, 1.0], size=3)
+    noise = rng.uniform(0.5, 2.0)
+    rot = _attitude(kind, t, r, rng)
+    raw = rot.inv().apply(b_itrs) @ a.T + offset + rng.normal(scale=noise, size=b_itrs.shape)
+    q = rot.as_quat()  # x, y, z, w
+    cols = np.column_stack([t, raw, q[:, [3, 0, 1, 2]], r])
+    header = "time,b_x,b_y,b_z,q_w,q_x,q_y,q_z,r_x,r_y,r_z"
+    np.savetxt(path, cols, delimiter=",", header=header, comments="", fmt="%.17g")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("kind", "seed"), [("tumbling", 3101), ("tumbling", 3102), ("nadir", 3201), ("nadir", 3202)]
+)
+def test_the_storm_pass_through_the_command_line(tmp_path: Path, kind: str, seed: int) -> None:
+    table, out = tmp_path / "pass.csv", tmp_path / "report.json"
+    _table(table, kind, seed)
+    assert main(["diagnose", str(table), "--attitude-frame", "ITRS", "--out", str(out)]) == 0
+    report = json.loads(out.read_text())
+    status = report["verdict_status"]
+    significant = {e["name"] for e in report["effects"] if e["significant"]}
+    assert significant <= ALLOWED, status
+    assert report["final"]["holdout_rms_nt"] <= report["baseline"]["holdout_rms_nt"] + 1e-9
+    explicit = (
+        "cannot be separated from the calibration on this span" in status
+        and "external_field" in status
+    )
+    # Tumbling: the external field, the auroral currents, or "none" with the gap stated (on the
+    # benchmark's 20 tumbling draws the external field or the explicit statement in 15; the
+    # others are such a "none": the external field's template needs a ring-current change the
+    # physics does not allow, and the report says so).
+    assert report["verdict"] in {"external_field", "field_aligned_currents", "none"}, status
+    if report["verdict"] == "none":
+        assert report["gap"]["unexplained"] and report["verdict_confidence"] is None
+        assert status.startswith("none: ") and "x the noise floor" in status
+    if kind == "nadir":
+        # Under nadir pointing every candidate but the crust is >= 99 % a change of the 12
+        # parameters on this span: nothing can be named, and the report says what would decide.
+        assert explicit, status
+        assert "prior calibration" in status
