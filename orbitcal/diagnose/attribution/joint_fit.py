@@ -15,11 +15,12 @@ import numpy.typing as npt
 
 from orbitcal.arrays import BoolArray, FloatArray, IntArray
 from orbitcal.diagnose.blocked import BlockedDesign
-from orbitcal.diagnose.bounds import consistency_reasons, param_range
 from orbitcal.diagnose.effects import (
     FIELD_SCALE_NT,
     DesignBlock,
     DiagnosisData,
+    block_inconsistencies,
+    block_ranges,
 )
 from orbitcal.diagnose.options import HOLDOUT_BLOCKS, N_BLOCKS
 from orbitcal.diagnose.prior import CalibrationPrior
@@ -83,8 +84,8 @@ class JointFit:
     def at_bounds(self, k: int, *, rel_tol: float = 1e-4) -> list[str]:
         """Names of block ``k``'s parameters that sit on the edge of their physical range."""
         out = []
-        for name, v in zip(self.blocks[k].names, self.coef[k], strict=True):
-            rng = param_range(name)
+        block = self.blocks[k]
+        for name, v, rng in zip(block.names, self.coef[k], block_ranges(block), strict=True):
             for edge in (rng.lower, rng.upper):
                 if np.isfinite(edge) and abs(float(v) - edge) <= rel_tol * max(abs(edge), 1.0):
                     out.append(name)
@@ -141,9 +142,9 @@ def fit_joint(
         Apply ``data.calibration_prior`` (if any) to the 12 calibration parameters; split fits,
         which ask what the free parameters absorb, turn it off.
     bounded : bool
-        Keep every effect parameter inside its physical range
-        (:func:`orbitcal.diagnose.bounds.param_range`): box-constrained least squares on the
-        normal equations of each reweighting step. False fits them freely (to tell whether a
+        Keep every effect parameter inside the physical range its effect gives it
+        (:meth:`orbitcal.diagnose.effects.Effect.param_range`): box-constrained least squares on
+        the normal equations of each reweighting step. False fits them freely (to tell whether a
         candidate only wins by leaving its range).
     weights : ndarray, shape (N, 3), optional
         Starting weight of each sample's three rows (default 1): with ``robust`` False, a
@@ -196,7 +197,7 @@ def fit_joint(
         prior_precision *= noise**2
     lo_s, hi_s = _scaled_bounds(blocks, scale) if bounded else (None, None)
     if bounded:
-        # Gaussian priors of parameters with a published value (bounds.ParamRange.prior_*),
+        # Gaussian priors of parameters with a published value (ParamRange.prior_*),
         # weighted by the noise of a fit without them (fixed, as for the calibration prior).
         pm, pp = _effect_priors(blocks, scale)
         if np.any(pp > 0.0):
@@ -318,7 +319,7 @@ def _scaled_bounds(
     lo = [np.full(12, -np.inf)]
     hi = [np.full(12, np.inf)]
     for bl in blocks:
-        ranges = [param_range(n) for n in bl.names]
+        ranges = block_ranges(bl)
         lo.append(np.array([r.lower for r in ranges]))
         hi.append(np.array([r.upper for r in ranges]))
     lo_all, hi_all = np.concatenate(lo), np.concatenate(hi)
@@ -335,8 +336,7 @@ def _effect_priors(
     prec = np.zeros(scale.size)
     col = 12
     for bl in blocks:
-        for n in bl.names:
-            rng = param_range(n)
+        for rng in block_ranges(bl):
             if rng.prior_mean is not None and rng.prior_sd:
                 mean[col] = rng.prior_mean * scale[col]
                 prec[col] = 1.0 / (rng.prior_sd * scale[col]) ** 2
@@ -370,7 +370,8 @@ def _train_bic(
 ) -> float:
     """Bayesian information criterion of a plain least-squares fit on the training samples.
 
-    Infinite when the last block's parameters contradict each other (``consistency_reasons``).
+    Infinite when the last block's parameters contradict each other (its effect's
+    ``consistency``).
     """
     fit = fit_joint(data, train, blocks, robust=False, bounded=bounded)
     if blocks and _inconsistent(fit, len(blocks) - 1):
@@ -447,7 +448,7 @@ def _sd(fit: JointFit, k: int) -> FloatArray:
 
 def _inconsistent(fit: JointFit, k: int) -> bool:
     return bool(
-        consistency_reasons(
-            fit.blocks[k].names, [float(v) for v in fit.coef[k]], [float(v) for v in _sd(fit, k)]
+        block_inconsistencies(
+            fit.blocks[k], [float(v) for v in fit.coef[k]], [float(v) for v in _sd(fit, k)]
         )
     )

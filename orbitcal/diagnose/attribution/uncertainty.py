@@ -11,10 +11,10 @@ import numpy as np
 
 from orbitcal.arrays import BoolArray, FloatArray
 from orbitcal.diagnose.attribution.joint_fit import JointFit, _sd
-from orbitcal.diagnose.bounds import param_range
 from orbitcal.diagnose.effects import (
     FIELD_SCALE_NT,
     DiagnosisData,
+    block_ranges,
 )
 
 #: Two-sided 90 % quantile of the standard normal distribution.
@@ -37,8 +37,8 @@ def _intervals(
     infl = max(_autocorr_inflation(r[:, i]) for i in range(3))
     sd = _sd(fit, k) * np.sqrt(infl)
     out: dict[str, list[float]] = {}
-    for n, v, e in zip(fit.blocks[k].names, fit.coef[k], sd, strict=True):
-        rng = param_range(n)
+    block = fit.blocks[k]
+    for n, v, e, rng in zip(block.names, fit.coef[k], sd, block_ranges(block), strict=True):
         out[n] = [max(float(v - Z90 * e), rng.lower), min(float(v + Z90 * e), rng.upper)]
     return out
 
