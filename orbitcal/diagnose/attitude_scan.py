@@ -14,6 +14,7 @@ from functools import partial
 import numpy as np
 
 from orbitcal.arrays import BoolArray, FloatArray
+from orbitcal.diagnose.calibration_columns import calibration_rows
 from orbitcal.diagnose.columns import (
     FunctionColumns,
     Index,
@@ -228,7 +229,7 @@ class AttitudeScan:
         self._rtr = [np.matmul(np.swapaxes(r, 1, 2), r).reshape(-1, 9) for r in self._rot]
         self._base = [
             np.concatenate(
-                [data.calibration_rows(self.idx[a0:a1])]
+                [calibration_rows(data, self.idx[a0:a1])]
                 + [bl.rows(self.idx[a0:a1]).reshape(-1, bl.width) for bl in self.fixed],
                 axis=1,
             )

@@ -11,6 +11,7 @@ import numpy as np
 
 from orbitcal.arrays import BoolArray, FloatArray
 from orbitcal.diagnose.attribution.joint_fit import JointFit, _sd
+from orbitcal.diagnose.calibration_columns import calibration_r_inv_of
 from orbitcal.diagnose.effects import (
     FIELD_SCALE_NT,
     DiagnosisData,
@@ -126,7 +127,7 @@ def _calibration_basis(data: DiagnosisData, train: BoolArray) -> _CalibrationBas
     """The calibration's orthonormal basis on the training rows, in factored form."""
     idx = np.flatnonzero(train)
     return _CalibrationBasis(
-        data.b_ref_body_nt[idx] / FIELD_SCALE_NT, data.calibration_r_inv_of(idx)
+        data.b_ref_body_nt[idx] / FIELD_SCALE_NT, calibration_r_inv_of(data, idx)
     )
 
 
