@@ -1,10 +1,11 @@
 """Field-by-field comparison of two ``orbitcal bench diagnose --out DIR`` results (issue 23).
 
 ``python benchmarks/house_identity.py BEFORE_DIR AFTER_DIR [--tol 1e-9]`` reads each directory's
-``diagnose_results.json`` and compares every field of every case and of the summary: strings,
-booleans, integers and lists of names exactly, numbers to ``tol`` (absolute, or relative for
-values above 1; NaN equals NaN). Timing fields (``seconds*``, ``wall_seconds``, the machine) are
-left out. Prints the number of fields compared and every difference; exits 1 when any.
+``diagnose_results.json`` (``diagnose_compound_results.json`` for ``--compound``) and compares
+every field of every case and of the summary: strings, booleans, integers and lists of names
+exactly, numbers to ``tol`` (absolute, or relative for values above 1; NaN equals NaN). Timing
+fields (``seconds*``, ``wall_seconds``, the machine) are left out. Prints the number of fields
+compared and every difference; exits 1 when any.
 """
 
 from __future__ import annotations
@@ -16,6 +17,9 @@ import sys
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
+
+#: The results file of ``bench diagnose`` and of ``bench diagnose --compound``.
+RESULT_FILES = ("diagnose_results.json", "diagnose_compound_results.json")
 
 #: Keys that time the run, not its result.
 TIMING_KEYS = frozenset({"seconds", "seconds_total", "wall_seconds", "machine"})
@@ -59,14 +63,22 @@ def count_fields(a: Any) -> int:
     return 1
 
 
+def _results_file(directory: Path) -> Path:
+    """The benchmark's results file in ``directory`` (single-effect or compound run)."""
+    for name in RESULT_FILES:
+        if (directory / name).exists():
+            return directory / name
+    raise FileNotFoundError(f"none of {', '.join(RESULT_FILES)} in {directory}")
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("before", type=Path)
     parser.add_argument("after", type=Path)
     parser.add_argument("--tol", type=float, default=1e-9)
     args = parser.parse_args()
-    before = json.loads((args.before / "diagnose_results.json").read_text())
-    after = json.loads((args.after / "diagnose_results.json").read_text())
+    before = json.loads(_results_file(args.before).read_text())
+    after = json.loads(_results_file(args.after).read_text())
     diffs = list(differences(before, after, "results", args.tol))
     cases = before.get("cases", [])
     print(
