@@ -412,7 +412,6 @@ def test_a_candidate_that_needs_an_unphysical_value_is_implausible() -> None:
 
 def test_bounded_fit_stays_in_range() -> None:
     from orbitcal.diagnose.attribution import fit_joint, time_blocks
-    from orbitcal.diagnose.bounds import param_range
     from orbitcal.diagnose.effects import get_effect
 
     data = make_world("parameter_drift", magnitude=5.0, attitude="tumbling", seed=3).data
@@ -423,5 +422,7 @@ def test_bounded_fit_stays_in_range() -> None:
     held = fit_joint(data, train, [block])
     # 300 nT/day injected on x: beyond the 100 nT/day a fluxgate offset drifts at most.
     assert free.coef[0][0] > 150.0
-    assert held.coef[0][0] == pytest.approx(param_range(block.names[0]).upper)
+    assert held.coef[0][0] == pytest.approx(
+        get_effect("parameter_drift").param_range(block.names[0]).upper
+    )
     assert held.at_bounds(0)[0] == block.names[0]

@@ -12,8 +12,7 @@ import numpy as np
 import pytest
 
 from orbitcal.diagnose.attribution import Attribution, JointFit, fit_joint, time_blocks
-from orbitcal.diagnose.bounds import param_range
-from orbitcal.diagnose.effects import DesignBlock, DiagnosisData
+from orbitcal.diagnose.effects import DesignBlock, DiagnosisData, get_effect
 from orbitcal.diagnose.honesty import (
     GAP_TIMES_NOISE,
     _bound_limited,
@@ -67,12 +66,13 @@ def test_noise_floor_is_the_white_noise_under_slow_signals_spikes_and_gaps() -> 
 
 
 def test_intervals_reaching_a_physical_bound_are_marked() -> None:
-    rng = param_range("dt_s")
+    rng = get_effect("time_offset").param_range("dt_s")
     effect = {
+        "name": "time_offset",
         "param_intervals_90": {
             "dt_s": [rng.lower, 0.1],
             "dt_squared_s2": [0.01, 0.02],
-        }
+        },
     }
     limited = _bound_limited(effect)
     assert limited["dt_s"] is True

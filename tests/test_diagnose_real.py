@@ -212,7 +212,7 @@ def test_swarm_storm_pass_without_a_prior() -> None:
     x 1.13 and a uniform -50.5 nT; low-latitude held-out mean [30.0, -14.8, -6.4] nT (N, E, C)
     against [-62, 88, -60] for the calibration alone ([4.8, -6.9, -10.0] with the prior).
     """
-    from orbitcal.diagnose.bounds import param_range
+    from orbitcal.diagnose.effects import effect_param_range
 
     data, lat, rot = _swarm_storm_data()
     report, att = _diagnose_parts(
@@ -232,7 +232,7 @@ def test_swarm_storm_pass_without_a_prior() -> None:
             }
         for name, (lo, hi) in e["param_intervals_90"].items():
             value = e["params"][name]
-            rng = param_range(name)
+            rng = effect_param_range(e["name"], name)
             assert rng.contains(value), (e["name"], name, value)
             assert rng.lower <= lo <= value + 1e-3 and value - 1e-3 <= hi <= rng.upper
     ext = by_name["external_field"]["params"]

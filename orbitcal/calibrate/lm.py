@@ -253,8 +253,7 @@ def levenberg_marquardt(
     history = [2.0 * loss / m]
     n = w.numel()
     diag_max = torch.zeros(n, dtype=torch.float64)
-    mu = opts.mu0
-    nu = 2.0
+    damping = _Damping(opts.mu0)
     stop: StopReason = "max_epochs"
     epochs = 0
     if opts.target_mse is not None and history[0] <= opts.target_mse:
@@ -268,61 +267,17 @@ def levenberg_marquardt(
         if bool(torch.all(g.abs() <= opts.gtol * torch.sqrt(diag.clamp_min(0.0) * (2.0 * loss)))):
             stop = "gradient"
             break
-        if opts.scaling == "marquardt":
-            d_max = float(diag.max())
-            scale = torch.clamp(diag, min=1e-12 * d_max + 1e-300)
-        else:
-            diag_max = torch.maximum(diag_max, diag)
-            d_max = float(diag_max.max())
-            if opts.scaling == "more":
-                scale = torch.clamp(diag_max, min=1e-12 * d_max + 1e-300)
-            else:  # Levenberg: μ·I, μ relative to the largest curvature seen
-                scale = torch.full_like(diag_max, d_max)
+        scale, diag_max = _damping_scale(diag, diag_max, opts.scaling)
         epochs += 1
-        accepted = False
-        for attempt in range(opts.max_rejections):
-            A = JtJ.clone()
-            A.diagonal().add_(scale, alpha=mu)
-            L, info = torch.linalg.cholesky_ex(A)
-            if int(info) != 0:
-                mu *= nu
-                nu *= 2.0
-                continue
-            delta = -torch.cholesky_solve(g.unsqueeze(1), L).squeeze(1)
-            w_new = w + delta
-            r_new = fn(w_new)
-            loss_new = 0.5 * float(r_new @ r_new)
-            # Predicted decrease of the linear model: ½ δᵀ(μ·D·δ − g)  (Madsen et al., eq. 3.14)
-            predicted = 0.5 * float(delta @ (mu * scale * delta - g))
-            actual = loss - loss_new
-            if actual > 0.0 and predicted > 0.0 and math.isfinite(loss_new):
-                if opts.update == "nielsen":
-                    rho = actual / predicted
-                    mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
-                    nu = 2.0
-                else:  # Marquardt (1963): divide by 10 on success
-                    mu = max(mu / 10.0, 1e-12)
-                accepted = True
-                break
-            if attempt == 0 and math.isfinite(predicted) and predicted <= opts.ftol * loss:
-                # the least-damped step predicts no meaningful decrease and gets none: converged
-                # to rounding (MINPACK's relative-reduction test, Moré 1978)
-                stop = "loss"
-                break
-            if opts.update == "nielsen":
-                mu *= nu
-                nu *= 2.0
-            else:
-                mu *= 10.0
-        if stop == "loss":
-            history.append(history[-1])  # this epoch left the parameters unchanged
+        step = _damped_step(fn, w, loss, JtJ, g, scale, damping, opts)
+        if not isinstance(step, _Step):
+            if step == "loss":
+                history.append(history[-1])  # this epoch left the parameters unchanged
+            stop = step
             break
-        if not accepted:
-            stop = "damping"
-            break
-        small_step = float(delta.norm()) <= opts.xtol * (float(w.norm()) + opts.xtol)
-        w = w_new
-        loss = loss_new
+        small_step = float(step.delta.norm()) <= opts.xtol * (float(w.norm()) + opts.xtol)
+        w = step.w
+        loss = step.loss
         losses.append(loss)
         small_drop = len(losses) > window and (
             losses[-1 - window] - loss <= opts.ftol * losses[-1 - window]
@@ -347,3 +302,85 @@ def levenberg_marquardt(
             break  # no new Jacobian that no step would use
         r, JtJ, g = normal_eq(w)
     return LMResult(w, epochs, loss, 2.0 * loss / m, stop, history, m)
+
+
+@dataclass
+class _Damping:
+    """The damping ``mu`` and its growth factor ``nu`` (Nielsen), carried between epochs."""
+
+    mu: float
+    nu: float = 2.0
+
+
+@dataclass(frozen=True)
+class _Step:
+    """An accepted step: its increment, the new parameters and their loss ``E``."""
+
+    delta: torch.Tensor
+    w: torch.Tensor
+    loss: float
+
+
+def _damping_scale(
+    diag: torch.Tensor, diag_max: torch.Tensor, scaling: str
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """The diagonal ``D`` the damping multiplies (``JᵀJ + μ·D``) and the running maximum of the
+    curvature ``diag(JᵀJ)`` (kept by the Moré and Levenberg scalings)."""
+    if scaling == "marquardt":
+        d_max = float(diag.max())
+        return torch.clamp(diag, min=1e-12 * d_max + 1e-300), diag_max
+    diag_max = torch.maximum(diag_max, diag)
+    d_max = float(diag_max.max())
+    if scaling == "more":
+        return torch.clamp(diag_max, min=1e-12 * d_max + 1e-300), diag_max
+    # Levenberg: μ·I, μ relative to the largest curvature seen
+    return torch.full_like(diag_max, d_max), diag_max
+
+
+def _damped_step(
+    fn: ResidualFn,
+    w: torch.Tensor,
+    loss: float,
+    JtJ: torch.Tensor,
+    g: torch.Tensor,
+    scale: torch.Tensor,
+    damping: _Damping,
+    opts: LMOptions,
+) -> _Step | StopReason:
+    """One epoch's step: the damping raised until a step lowers the loss as the linear model
+    predicts (the step), or ``"loss"`` (the least-damped step predicts no meaningful decrease
+    and gets none: converged) or ``"damping"`` (``max_rejections`` steps rejected). Updates
+    ``damping``."""
+    for attempt in range(opts.max_rejections):
+        A = JtJ.clone()
+        A.diagonal().add_(scale, alpha=damping.mu)
+        L, info = torch.linalg.cholesky_ex(A)
+        if int(info) != 0:
+            damping.mu *= damping.nu
+            damping.nu *= 2.0
+            continue
+        delta = -torch.cholesky_solve(g.unsqueeze(1), L).squeeze(1)
+        w_new = w + delta
+        r_new = fn(w_new)
+        loss_new = 0.5 * float(r_new @ r_new)
+        # Predicted decrease of the linear model: ½ δᵀ(μ·D·δ − g)  (Madsen et al., eq. 3.14)
+        predicted = 0.5 * float(delta @ (damping.mu * scale * delta - g))
+        actual = loss - loss_new
+        if actual > 0.0 and predicted > 0.0 and math.isfinite(loss_new):
+            if opts.update == "nielsen":
+                rho = actual / predicted
+                damping.mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+                damping.nu = 2.0
+            else:  # Marquardt (1963): divide by 10 on success
+                damping.mu = max(damping.mu / 10.0, 1e-12)
+            return _Step(delta, w_new, loss_new)
+        if attempt == 0 and math.isfinite(predicted) and predicted <= opts.ftol * loss:
+            # the least-damped step predicts no meaningful decrease and gets none: converged
+            # to rounding (MINPACK's relative-reduction test, Moré 1978)
+            return "loss"
+        if opts.update == "nielsen":
+            damping.mu *= damping.nu
+            damping.nu *= 2.0
+        else:
+            damping.mu *= 10.0
+    return "damping"

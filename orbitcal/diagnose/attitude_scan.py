@@ -14,6 +14,7 @@ from functools import partial
 import numpy as np
 
 from orbitcal.arrays import BoolArray, FloatArray
+from orbitcal.diagnose.calibration_columns import calibration_rows
 from orbitcal.diagnose.columns import (
     FunctionColumns,
     Index,
@@ -56,12 +57,16 @@ def _rotation_columns(data: DiagnosisData, index: Index | None = None) -> FloatA
 def design_attitude(
     data: DiagnosisData, train: BoolArray, *, fixed: Sequence[DesignBlock] = ()
 ) -> DesignBlock | None:
-    # A slowly varying small rotation dtheta(t) of the attitude: db = dtheta x B. The constant part
-    # is a misalignment the 12 parameters absorb; the variation is a few sinusoids (thermal
-    # distortion, star-tracker errors) whose periods are found by a matching-pursuit scan of the
-    # training residual (periods shorter than 80 % of the training span). Beside effects already
-    # selected (``fixed``), their regressors are projected out with the calibration's: each
-    # period's gain is then what it adds to a joint fit of them all.
+    """The attitude error's design: the sinusoids of the periods a scan of the training residual
+    finds (None when the span is too short or no period gains anything).
+
+    A slowly varying small rotation dtheta(t) of the attitude: db = dtheta x B. The constant part
+    is a misalignment the 12 parameters absorb; the variation is a few sinusoids (thermal
+    distortion, star-tracker errors) whose periods are found by a matching-pursuit scan of the
+    training residual (periods shorter than 80 % of the training span). Beside effects already
+    selected (``fixed``), their regressors are projected out with the calibration's: each
+    period's gain is then what it adds to a joint fit of them all.
+    """
     t = data.t_utc_s - float(data.t_utc_s[train][0])
     span = float(t[train][-1]) if np.any(train) else 0.0
     periods = ATTITUDE_PERIODS_S[0.8 * span > ATTITUDE_PERIODS_S]
@@ -75,88 +80,115 @@ def design_attitude(
     # All periods of a grid are summed at once, a block of samples at a time. Q (the calibration
     # columns and the sinusoids of the periods kept) is never held whole: it is X R^-1, the
     # columns X built per block and R from a block-updated QR (:class:`AttitudeScan`).
+    beams = _beam_search(scan, periods)
+    if not beams[0][1]:
+        return None
+    # one refinement pass for every set, then the best set refined to convergence
+    first = [_refine_periods(scan, chosen, 1) for _, chosen in beams]
+    best = min(first, key=lambda t: t[1])[0]
+    chosen = _refine_periods(scan, best, ATTITUDE_REFINE_PASSES - 1)[0]
+    return _attitude_block(data, train, chosen)
 
-    def first_best(periods_s: FloatArray, g: FloatArray, floor: float) -> tuple[float, float]:
-        # the first period whose gain is the largest, if it beats ``floor`` (a sequential scan
-        # keeping strictly better gains picks the same one)
-        if g.size == 0:
-            return floor, 0.0
-        i = int(np.argmax(g))
-        if not g[i] > floor:
-            return floor, 0.0
-        return float(g[i]), float(periods_s[i])
 
-    def peaks(periods_s: FloatArray, g: FloatArray, n: int) -> list[float]:
-        # the ``n`` largest local maxima of the gain over the grid, at least 5 % apart
-        order = np.argsort(-g, kind="stable")
-        out: list[float] = []
-        for i in order:
-            if len(out) == n or not g[i] > 0.0:
-                break
-            p = float(periods_s[i])
-            left = g[i - 1] if i > 0 else -np.inf
-            right = g[i + 1] if i + 1 < g.size else -np.inf
-            if g[i] >= left and g[i] >= right and all(abs(p / q - 1.0) >= 0.05 for q in out):
-                out.append(p)
-        return out
+def _first_best(periods_s: FloatArray, g: FloatArray, floor: float) -> tuple[float, float]:
+    """The largest gain and the first period with it, if it beats ``floor`` (else ``floor, 0``):
+    a sequential scan keeping strictly better gains picks the same one."""
+    if g.size == 0:
+        return floor, 0.0
+    i = int(np.argmax(g))
+    if not g[i] > floor:
+        return floor, 0.0
+    return float(g[i]), float(periods_s[i])
 
-    def refine(chosen: list[float], passes: int) -> tuple[list[float], float]:
-        # Cyclic refinement: re-fit each period with the others fixed (close periods that one
-        # training span cannot resolve at once are separated this way), until a pass changes
-        # none; returns the periods and their training residual sum of squares.
-        chosen = list(chosen)
-        for _ in range(passes):
-            before = list(chosen)
-            for j in range(len(chosen)):
-                basis = scan.basis(chosen[:j] + chosen[j + 1 :])
-                r_now = scan.residual(basis)
-                grid = chosen[j] * np.linspace(0.94, 1.06, 61)
-                _, p_best = first_best(grid, scan.gains(grid, r_now, basis), -1.0)
-                chosen[j] = p_best if p_best else chosen[j]
-            if chosen == before:
-                break
-        r_end = scan.residual(scan.basis(chosen))
-        return chosen, float(r_end @ r_end)
 
-    # Beam search over the greedy steps: the best ``ATTITUDE_BEAM`` sets of periods are carried
-    # from step to step (each extended by the best peaks of its gain curve), so that a first
-    # period that a greedy scan would take from a mixture of several sinusoids cannot lock the
-    # others out; the set with the smallest training residual after refinement wins.
+def _gain_peaks(periods_s: FloatArray, g: FloatArray, n: int) -> list[float]:
+    """The periods of the ``n`` largest local maxima of the gain over the grid, >= 5 % apart."""
+    order = np.argsort(-g, kind="stable")
+    out: list[float] = []
+    for i in order:
+        if len(out) == n or not g[i] > 0.0:
+            break
+        p = float(periods_s[i])
+        left = g[i - 1] if i > 0 else -np.inf
+        right = g[i + 1] if i + 1 < g.size else -np.inf
+        if g[i] >= left and g[i] >= right and all(abs(p / q - 1.0) >= 0.05 for q in out):
+            out.append(p)
+    return out
+
+
+def _refine_periods(
+    scan: AttitudeScan, chosen: list[float], passes: int
+) -> tuple[list[float], float]:
+    """Cyclic refinement: each period re-fitted with the others fixed (close periods that one
+    training span cannot resolve at once are separated this way), until a pass changes none;
+    the periods and their training residual sum of squares."""
+    chosen = list(chosen)
+    for _ in range(passes):
+        before = list(chosen)
+        for j in range(len(chosen)):
+            basis = scan.basis(chosen[:j] + chosen[j + 1 :])
+            r_now = scan.residual(basis)
+            grid = chosen[j] * np.linspace(0.94, 1.06, 61)
+            _, p_best = _first_best(grid, scan.gains(grid, r_now, basis), -1.0)
+            chosen[j] = p_best if p_best else chosen[j]
+        if chosen == before:
+            break
+    r_end = scan.residual(scan.basis(chosen))
+    return chosen, float(r_end @ r_end)
+
+
+def _beam_search(scan: AttitudeScan, periods: FloatArray) -> list[tuple[float, list[float]]]:
+    """The best ``ATTITUDE_BEAM`` sets of periods after the greedy steps, best first, with their
+    training residual sum of squares (one empty set when no period gains anything).
+
+    The sets are carried from step to step (each extended by the best peaks of its gain curve),
+    so that a first period that a greedy scan would take from a mixture of several sinusoids
+    cannot lock the others out.
+    """
     beams: list[tuple[float, list[float]]] = [(0.0, [])]
     for _ in range(ATTITUDE_MAX_TERMS):
         grown: list[tuple[float, list[float]]] = []
         for _score, chosen in beams:
-            basis = scan.basis(chosen)
-            r_now = scan.residual(basis)
-            rss_now = float(r_now @ r_now)
-            free = np.array(
-                [not any(abs(float(p) / c - 1.0) < 0.05 for c in chosen) for p in periods], bool
-            )
-            for start in peaks(
-                periods[free], scan.gains(periods[free], r_now, basis), ATTITUDE_BEAM
-            ):
-                # Refine the period on a fine grid (+-2.5 %): phase errors grow over the
-                # held-out span.
-                fine = start * np.linspace(0.975, 1.025, 51)
-                g_fine = scan.gains(fine, r_now, basis)
-                i = int(np.argmax(g_fine))
-                period, gain = float(fine[i]), float(g_fine[i])
-                key = sorted([*chosen, period])
-                if any(
-                    all(abs(a / b - 1.0) < 0.01 for a, b in zip(key, sorted(c), strict=True))
-                    for _, c in grown
-                ):
-                    continue
-                grown.append((rss_now - gain, [*chosen, period]))
+            _grow_beam(scan, periods, chosen, grown)
         if not grown:
             break
         grown.sort(key=lambda t: t[0])
         beams = grown[:ATTITUDE_BEAM]
-    if not beams[0][1]:
-        return None
-    # one refinement pass for every set, then the best set refined to convergence
-    first = [refine(chosen, 1) for _, chosen in beams]
-    chosen = refine(min(first, key=lambda t: t[1])[0], ATTITUDE_REFINE_PASSES - 1)[0]
+    return beams
+
+
+def _grow_beam(
+    scan: AttitudeScan,
+    periods: FloatArray,
+    chosen: list[float],
+    grown: list[tuple[float, list[float]]],
+) -> None:
+    """Append to ``grown`` the set ``chosen`` extended by each of the best peaks of its gain
+    curve (a set already in ``grown``, to 1 %, is not added again)."""
+    basis = scan.basis(chosen)
+    r_now = scan.residual(basis)
+    rss_now = float(r_now @ r_now)
+    free = np.array(
+        [not any(abs(float(p) / c - 1.0) < 0.05 for c in chosen) for p in periods], bool
+    )
+    for start in _gain_peaks(periods[free], scan.gains(periods[free], r_now, basis), ATTITUDE_BEAM):
+        # Refine the period on a fine grid (+-2.5 %): phase errors grow over the
+        # held-out span.
+        fine = start * np.linspace(0.975, 1.025, 51)
+        g_fine = scan.gains(fine, r_now, basis)
+        i = int(np.argmax(g_fine))
+        period, gain = float(fine[i]), float(g_fine[i])
+        key = sorted([*chosen, period])
+        if any(
+            all(abs(a / b - 1.0) < 0.01 for a, b in zip(key, sorted(c), strict=True))
+            for _, c in grown
+        ):
+            continue
+        grown.append((rss_now - gain, [*chosen, period]))
+
+
+def _attitude_block(data: DiagnosisData, train: BoolArray, chosen: list[float]) -> DesignBlock:
+    """The sinusoids of the periods ``chosen`` as a design block (cos, sin per axis)."""
     names = [
         f"dtheta_{axis}_{fname}_{period:.0f}s_mrad"
         for period in chosen
@@ -228,7 +260,7 @@ class AttitudeScan:
         self._rtr = [np.matmul(np.swapaxes(r, 1, 2), r).reshape(-1, 9) for r in self._rot]
         self._base = [
             np.concatenate(
-                [data.calibration_rows(self.idx[a0:a1])]
+                [calibration_rows(data, self.idx[a0:a1])]
                 + [bl.rows(self.idx[a0:a1]).reshape(-1, bl.width) for bl in self.fixed],
                 axis=1,
             )

@@ -21,7 +21,9 @@ import numpy as np
 import numpy.typing as npt
 
 from orbitcal.arrays import FloatArray
-from orbitcal.diagnose.effects import FIELD_SCALE_NT, DesignBlock, DiagnosisData
+from orbitcal.diagnose.calibration_columns import calibration_r_inv, calibration_rows
+from orbitcal.diagnose.data import FIELD_SCALE_NT, DiagnosisData
+from orbitcal.diagnose.design import DesignBlock
 
 __all__ = ["FIT_BLOCK_SAMPLES", "BlockedDesign"]
 
@@ -66,8 +68,8 @@ def _effect_scales(data: DiagnosisData, block: DesignBlock) -> FloatArray:
         part = slice(a, a + FIT_BLOCK_SAMPLES)
         eff = block.rows(part).reshape(-1, q)
         sum_sq += np.sum(eff**2, axis=0)
-        x_t_eff += data.calibration_rows(part).T @ eff
-    q_eff = data.calibration_r_inv.T @ x_t_eff
+        x_t_eff += calibration_rows(data, part).T @ eff
+    q_eff = calibration_r_inv(data).T @ x_t_eff
     rest_sq = np.clip(sum_sq - np.sum(q_eff**2, axis=0), 0.0, None)
     raw = np.sqrt(sum_sq / n_rows)
     scale = np.maximum(np.sqrt(rest_sq / n_rows), 1e-6 * raw)

@@ -1,5 +1,9 @@
 """The diagnosis's arrays: :class:`DiagnosisData`, the samples and what is derived from them.
 
+Plain data: the geometry derived from the samples (rates, gradients, magnetic coordinates) is
+cached here; the fits' computations on them live with the fits
+(:mod:`orbitcal.diagnose.calibration_columns` for the calibration's columns and basis).
+
 Geometry helpers use the centred dipole of :mod:`orbitcal.geomag` (IGRF-14 at 2020.0), the same
 one the simulator uses.
 """
@@ -15,11 +19,6 @@ import numpy as np
 import numpy.typing as npt
 
 from orbitcal.arrays import BoolArray, FloatArray
-from orbitcal.diagnose.columns import (
-    Index,
-    chunk_slices,
-    triangular_factor,
-)
 from orbitcal.diagnose.prior import CalibrationPrior
 from orbitcal.diagnose.track import along_track
 from orbitcal.geomag import dipole_axis_itrs, magnetic_latitude_deg
@@ -142,29 +141,6 @@ class DiagnosisData:
             raise ValueError("x_hk must have shape (N, len(hk_names))")
         if np.any(np.diff(self.t_utc_s) <= 0):
             raise ValueError("t_utc_s must be strictly increasing")
-
-    def calibration_rows(self, index: Index) -> FloatArray:
-        """The 12 calibration columns (``b_ref / FIELD_SCALE_NT`` per axis and an offset) of the
-        samples ``index``, rows sample-major, shape (3 m, 12)."""
-        b = self.b_ref_body_nt[index] / FIELD_SCALE_NT
-        x = np.zeros((b.shape[0], 3, 12))
-        for i in range(3):
-            x[:, i, 3 * i : 3 * i + 3] = b
-            x[:, i, 9 + i] = 1.0
-        return x.reshape(-1, 12)
-
-    def calibration_r_inv_of(self, index: npt.NDArray[np.intp]) -> FloatArray:
-        """Inverse ``R^-1`` (12, 12) of the triangular factor of the 12 calibration columns on
-        the samples ``index``, ``X = Q R``: an orthonormal basis of the calibration there is
-        ``X R^-1``, built a block of samples at a time (the whole 3N x 12 ``Q``, 288 B per
-        sample, is never held)."""
-        blocks = (self.calibration_rows(index[part]) for part in chunk_slices(index.size))
-        return np.asarray(np.linalg.inv(triangular_factor(blocks, 12)), dtype=np.float64)
-
-    @cached_property
-    def calibration_r_inv(self) -> FloatArray:
-        """:meth:`calibration_r_inv_of` all samples, computed once per data set."""
-        return self.calibration_r_inv_of(np.arange(self.n))
 
     @property
     def n(self) -> int:

@@ -56,6 +56,9 @@ class DesignBlock:
     refine : callable, optional
         Forms near this one (a bias step a little earlier or later), tried when this one is
         chosen among the alternatives; each may refine further.
+    effect : str
+        The catalogue effect the block belongs to ("" for none), which the joint fit asks for
+        the ranges of its parameters; set by ``Effect.design``.
     """
 
     source: FloatArray | Columns
@@ -63,6 +66,7 @@ class DesignBlock:
     variant: str = ""
     alternatives: Sequence[DesignBlock] = ()
     refine: Callable[[], Sequence[DesignBlock]] | None = field(default=None, compare=False)
+    effect: str = field(default="", compare=False)
 
     @property
     def n(self) -> int:

@@ -21,6 +21,7 @@ one the simulator uses.
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -30,6 +31,14 @@ import numpy as np
 
 from orbitcal.arrays import BoolArray, FloatArray
 from orbitcal.diagnose.attitude_scan import design_attitude
+from orbitcal.diagnose.bounds import (
+    FREE,
+    ParamRange,
+    PrefixRanges,
+    match_prefix,
+    symmetric,
+    time_shift_consistency,
+)
 from orbitcal.diagnose.data import FIELD_SCALE_NT, DiagnosisData
 from orbitcal.diagnose.design import (
     QUIET_MLAT_DEG,
@@ -54,7 +63,11 @@ __all__ = [
     "DesignBlock",
     "DiagnosisData",
     "Effect",
+    "ParamRange",
     "RegionalTest",
+    "block_inconsistencies",
+    "block_ranges",
+    "effect_param_range",
     "get_effect",
 ]
 
@@ -87,16 +100,18 @@ class Effect:
         One line: what the model is.
     witness : str
         One line: what in the data reveals it (and which inputs it needs).
-    design : callable
-        ``design(data, train_mask) -> DesignBlock | None``; None when the witness is missing.
+    build : callable
+        ``build(data, train_mask) -> DesignBlock | None``; None when the witness is missing.
         ``train_mask`` marks the samples a data-driven choice (e.g. a step time) may look at.
+        :meth:`design` calls it and marks the block (its alternatives and refinements too) as
+        this effect's.
     absorbed_by_calibration : bool
         True when the 12 parameters can absorb it in some attitude regimes (needs split fits).
-    design_beside : callable, optional
-        ``design_beside(data, train, fixed)``: the design found beside already selected effects
+    build_beside : callable, optional
+        ``build_beside(data, train, fixed)``: the design found beside already selected effects
         (their regressors fitted jointly with it), for designs found by a scan of the data: such
         an effect is scanned again on what the selected ones leave
-        (:attr:`rescanned_beside_others`).
+        (:attr:`rescanned_beside_others`, :meth:`design_beside`).
     near_twin : str, optional
         The effect the data of a few orbits hardly tell from this one: when this one is
         selected, the twin's simplest form is fitted in its place and, if the held-out blocks
@@ -105,24 +120,99 @@ class Effect:
         How the effect is judged where the held-out blocks cannot judge it (auroral currents
         that change from crossing to crossing), and on which samples the other effects are
         fitted and judged when it fills the calibration's residual.
+    param_ranges : tuple of (prefix, ParamRange)
+        The physical range (and, for some, a Gaussian prior) of each of its parameters, by
+        parameter-name prefix, first match wins (sources in ``docs/diagnosis_priors.md``):
+        every joint fit keeps the parameters inside (:meth:`param_range`).
+    consistency : callable, optional
+        ``consistency(names, values, sds) -> list of str``: why the fitted parameters contradict
+        a relation physics fixes between them (empty when they do not); a variant that does is
+        not chosen.
     """
 
     name: str
     physics: str
     witness: str
-    design: DesignFn
+    build: DesignFn
     absorbed_by_calibration: bool = False
-    design_beside: (
+    build_beside: (
         Callable[[DiagnosisData, BoolArray, Sequence[DesignBlock]], DesignBlock | None] | None
     ) = None
     near_twin: str | None = None
     regional_test: RegionalTest | None = None
+    param_ranges: PrefixRanges = ()
+    consistency: Callable[[list[str], list[float], list[float]], list[str]] | None = None
 
     @property
     def rescanned_beside_others(self) -> bool:
         """Whether its design comes from a scan of the residual, to be done again beside the
         effects selected before it (the attitude error's periods)."""
-        return self.design_beside is not None
+        return self.build_beside is not None
+
+    def design(self, data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
+        """Its design block on ``data`` (None when the witness is missing), marked as its own."""
+        return _owned(self.build(data, train), self.name)
+
+    def design_beside(
+        self, data: DiagnosisData, train: BoolArray, fixed: Sequence[DesignBlock]
+    ) -> DesignBlock | None:
+        """Its design found beside the blocks ``fixed`` (for :attr:`rescanned_beside_others`
+        effects; else its plain :meth:`design`)."""
+        if self.build_beside is None:
+            return self.design(data, train)
+        return _owned(self.build_beside(data, train, fixed), self.name)
+
+    def param_range(self, name: str) -> ParamRange:
+        """The physical range of its parameter ``name`` (unbounded when none is declared)."""
+        return match_prefix(self.param_ranges, name)
+
+    def inconsistencies(self, names: list[str], values: list[float], sds: list[float]) -> list[str]:
+        """Why fitted values of its parameters contradict each other (:attr:`consistency`)."""
+        return [] if self.consistency is None else self.consistency(names, values, sds)
+
+
+def _owned(block: DesignBlock | None, effect: str) -> DesignBlock | None:
+    """``block`` marked as ``effect``'s, with its alternatives and the forms its refinement
+    makes (so that a joint fit asks that effect for the ranges of the block's parameters)."""
+    if block is None:
+        return None
+    refine = block.refine
+
+    def refined() -> list[DesignBlock]:
+        assert refine is not None
+        return [b for b in (_owned(x, effect) for x in refine()) if b is not None]
+
+    return dataclasses.replace(
+        block,
+        effect=effect,
+        alternatives=tuple(
+            b for b in (_owned(x, effect) for x in block.alternatives) if b is not None
+        ),
+        refine=None if refine is None else refined,
+    )
+
+
+def block_ranges(block: DesignBlock) -> list[ParamRange]:
+    """The physical range of each of ``block``'s parameters, from the effect it belongs to
+    (unbounded for a block of no effect of the catalogue)."""
+    if not block.effect:
+        return [FREE] * block.width
+    effect = get_effect(block.effect)
+    return [effect.param_range(n) for n in block.names]
+
+
+def effect_param_range(effect: str, name: str) -> ParamRange:
+    """The range of the parameter ``name`` of the effect called ``effect`` (unbounded when no
+    effect of the catalogue is called so): for the report's effects, named by their dicts."""
+    return _BY_NAME[effect].param_range(name) if effect in _BY_NAME else FREE
+
+
+def block_inconsistencies(block: DesignBlock, values: list[float], sds: list[float]) -> list[str]:
+    """Why the fitted ``values`` of ``block``'s parameters contradict each other, asked of the
+    effect it belongs to (none for a block of no effect)."""
+    if not block.effect:
+        return []
+    return get_effect(block.effect).inconsistencies(block.names, values, sds)
 
 
 @dataclass(frozen=True)
@@ -169,6 +259,11 @@ FAC_REGIONAL_TEST = RegionalTest(
 )
 
 
+_SENSITIVITY_THERMAL = "sensitivity thermal coefficient <= 500 ppm/degC (x 5e4 nT)"
+_SOLAR_ARRAY = "stray field of solar-array currents, <= 500 nT"
+_NONLINEARITY = "nonlinearity <= 1 % of 5e4 nT"
+
+#: The catalogue, each effect with the ranges of its parameters (``docs/diagnosis_priors.md``).
 CATALOGUE: tuple[Effect, ...] = (
     Effect(
         "temperature",
@@ -176,12 +271,21 @@ CATALOGUE: tuple[Effect, ...] = (
         "a temperature channel; residual correlates with it (often with sunlight)",
         _design_temperature,
         absorbed_by_calibration=True,
+        param_ranges=(
+            # fluxgate offset and sensitivity thermal coefficients
+            ("offset_", symmetric(10.0, "fluxgate offset thermal coefficient, <= 10 nT/degC")),
+            *((f"scale_{a}_per_degc", symmetric(25.0, _SENSITIVITY_THERMAL)) for a in "xyz"),
+        ),
     ),
     Effect(
         "magnetorquer",
         "3x3 coupling of the magnetorquer dipole commands into the sensor",
         "mtq_x, mtq_y, mtq_z commands; residual steps when they switch",
         _design_magnetorquer,
+        param_ranges=(
+            # the dipole law 2 mu0 m / (4 pi d^3) at d >= 0.27 m
+            ("coupling_", symmetric(1.0e4, "dipole field of 1 A m^2 at >= 0.27 m from the sensor")),
+        ),
     ),
     Effect(
         "time_offset",
@@ -194,6 +298,15 @@ CATALOGUE: tuple[Effect, ...] = (
         # the Earth's rotation only (0.46 km/s x cos(latitude) of 7.6 km/s, across the track),
         # which a few orbits hardly tell apart (Selection.near_twins).
         near_twin="orbit_error",
+        param_ranges=(
+            # a clock synchronised by ground contacts or GNSS
+            (
+                "dt_squared_s2",
+                ParamRange(0.0, 25.0, "second order of the same shift: 0 <= dt^2 <= 25"),
+            ),
+            ("dt_s", symmetric(5.0, "time-tag error of a synchronised on-board clock, <= 5 s")),
+        ),
+        consistency=time_shift_consistency,
     ),
     Effect(
         "external_field",
@@ -201,12 +314,46 @@ CATALOGUE: tuple[Effect, ...] = (
         "constant plus RC-index-driven (or a per-window trend when no index covers the data)",
         "residual along the dipole axis, same sign at all latitudes; follows the RC/Dst index",
         _design_external,
+        param_ranges=(
+            # the ring current and its rate of change
+            (
+                "uniform_along_dipole_nt",
+                ParamRange(
+                    -2000.0, 200.0, "magnetospheric field along the dipole: Dst >= -1760 nT"
+                ),
+            ),
+            (
+                "uniform_trend_nt_per_day",
+                symmetric(7200.0, "ring-current rate of change <= 300 nT/h (extreme storms)"),
+            ),
+            (
+                "uniform_recovering_nt",
+                symmetric(
+                    2000.0, "decaying storm-time ring-current field at the start: |Dst| <= 1760 nT"
+                ),
+            ),
+            (
+                "rc_coefficient",
+                ParamRange(0.3, 3.0, "field per nT of RC index, external + induced", 1.0, 0.5),
+            ),
+            (
+                "rc_model_scale",
+                ParamRange(0.2, 3.0, "RC-driven model amplitude, positive, near 1", 1.0, 0.5),
+            ),
+        ),
     ),
     Effect(
         "crustal_field",
         "static lithospheric field fixed to the Earth (a crustal model, scaled)",
         "residual repeats with position on the ground track; needs a crustal model",
         _design_crustal,
+        param_ranges=(
+            # a published model's amplitude
+            (
+                "crust_scale",
+                ParamRange(0.3, 3.0, "amplitude of a published crustal model, near 1", 1.0, 0.5),
+            ),
+        ),
     ),
     Effect(
         "sun_driven",
@@ -214,12 +361,22 @@ CATALOGUE: tuple[Effect, ...] = (
         "sunlit vs eclipse split fits disagree; needs the Sun direction and eclipse flag",
         _design_sun,
         absorbed_by_calibration=True,
+        param_ranges=(
+            # solar-array currents
+            ("sunlit_offset_", symmetric(500.0, _SOLAR_ARRAY)),
+            ("sun_", symmetric(500.0, _SOLAR_ARRAY)),
+        ),
     ),
     Effect(
         "nonlinearity",
         "quadratic and cubic terms of the sensor transfer function, per axis",
         "residual grows with |B| on an axis faster than linearly",
         _design_nonlinearity,
+        param_ranges=(
+            # at 5e4 nT
+            ("quadratic_", ParamRange(-500.0, 500.0, _NONLINEARITY, 0.0, 250.0)),
+            ("cubic_", ParamRange(-500.0, 500.0, _NONLINEARITY, 0.0, 250.0)),
+        ),
     ),
     Effect(
         "orbit_error",
@@ -230,6 +387,17 @@ CATALOGUE: tuple[Effect, ...] = (
         _design_orbit,
         absorbed_by_calibration=True,
         near_twin="time_offset",
+        param_ranges=(
+            # of an element set
+            (
+                "along_track_rate_km_per_day",
+                symmetric(50.0, "SGP4 along-track error growth <= 50 km/day"),
+            ),
+            ("along_track_km", symmetric(100.0, "SGP4 along-track error <= 100 km")),
+            ("along_track_", symmetric(20.0, "once-per-rev along-track error <= 20 km")),
+            ("radial_", symmetric(20.0, "radial error of an element set <= 20 km")),
+            ("cross_track_", symmetric(20.0, "cross-track error of an element set <= 20 km")),
+        ),
     ),
     Effect(
         "parameter_drift",
@@ -237,6 +405,15 @@ CATALOGUE: tuple[Effect, ...] = (
         "split fits of consecutive time blocks disagree; the held-out error grows with time",
         _design_drift,
         absorbed_by_calibration=True,
+        param_ranges=(
+            *((f"bias_{a}_step", symmetric(2000.0, "offset step <= 2000 nT")) for a in "xyz"),
+            ("bias_", symmetric(100.0, "offset drift <= 100 nT/day")),
+            *(
+                (f"scale_{a}_x5e+04_step", symmetric(2500.0, "scale-factor step <= 5 % (x 5e4 nT)"))
+                for a in "xyz"
+            ),
+            ("scale_", symmetric(100.0, "scale-factor drift <= 2000 ppm/day (x 5e4 nT)")),
+        ),
     ),
     Effect(
         "field_aligned_currents",
@@ -245,6 +422,9 @@ CATALOGUE: tuple[Effect, ...] = (
         "residual concentrated at |magnetic latitude| > 60 deg, perpendicular to B",
         _design_fac,
         regional_test=FAC_REGIONAL_TEST,
+        param_ranges=(
+            ("east_", symmetric(3000.0, "field-aligned-current perturbation at LEO <= 3000 nT")),
+        ),
     ),
     Effect(
         "attitude_error",
@@ -253,7 +433,8 @@ CATALOGUE: tuple[Effect, ...] = (
         "vector residual perpendicular to B while the scalar residual stays clean",
         design_attitude,
         absorbed_by_calibration=True,
-        design_beside=lambda data, train, fixed: design_attitude(data, train, fixed=fixed),
+        build_beside=lambda data, train, fixed: design_attitude(data, train, fixed=fixed),
+        param_ranges=(("dtheta_", symmetric(100.0, "attitude error <= 100 mrad (~6 deg)")),),
     ),
 )
 

@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from orbitcal.arrays import BoolArray, FloatArray
-from orbitcal.diagnose.bounds import param_range
+from orbitcal.diagnose.effects import effect_param_range
 from orbitcal.diagnose.signed_rank import signed_rank_greater_p
 from orbitcal.metrics import norm_rms_nt
 
@@ -270,7 +270,7 @@ def _bound_limited(effect: dict[str, Any]) -> dict[str, bool]:
     for name, iv in (effect.get("param_intervals_90") or {}).items():
         if iv is None or len(iv) != 2 or iv[0] is None or iv[1] is None:
             continue
-        rng = param_range(name)
+        rng = effect_param_range(str(effect.get("name")), name)
         tol = 1e-6 * max(
             abs(rng.lower) if np.isfinite(rng.lower) else 0.0,
             abs(rng.upper) if np.isfinite(rng.upper) else 0.0,

@@ -127,10 +127,11 @@ def _param_meaning(name: str) -> str:
     return f"[{unit}]" if unit else ""
 
 
-def _bounds(name: str) -> tuple[float, float] | None:
-    from orbitcal.diagnose.bounds import param_range
+def _bounds(effect: str, name: str) -> tuple[float, float] | None:
+    """The physical range of ``effect``'s parameter ``name`` (None when unbounded)."""
+    from orbitcal.diagnose.effects import effect_param_range
 
-    r = param_range(name)
+    r = effect_param_range(effect, name)
     if not (math.isfinite(r.lower) and math.isfinite(r.upper)):
         return None
     return r.lower, r.upper
@@ -171,7 +172,7 @@ def _param_rows(effect: dict[str, Any]) -> list[ParamRow]:
         text = "–"
         if isinstance(iv, list | tuple) and len(iv) == 2 and None not in iv:
             lo, hi = float(iv[0]), float(iv[1])
-            bounds = _bounds(name)
+            bounds = _bounds(str(effect.get("name")), name)
             if bounds is not None and (_is_bound(lo, bounds[0]) or _is_bound(hi, bounds[1])):
                 limited = True
             text = f"{format_number(lo)} … {format_number(hi)}"

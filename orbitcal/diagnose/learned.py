@@ -48,6 +48,7 @@ interpolation). A whole call takes about 4 s of one core for 10^4 to 4 x 10^4 sa
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -463,72 +464,29 @@ def learned_field_model(
     rng = rng if rng is not None else np.random.default_rng(0)
     train = np.asarray(train, dtype=bool)
     holdout = np.asarray(holdout, dtype=bool)
-    r = data.r_itrs_km
-    basis = _nec_basis(r)
-    r_itrs = np.einsum("nji,nj->ni", data.rot_itrs_to_body, residual_body_nt)
-    r_nec = np.einsum("nij,nj->ni", basis, r_itrs)
-    radius = np.linalg.norm(r, axis=1)
-    colat = np.arccos(np.clip(r[:, 2] / radius, -1.0, 1.0))
-    lon_rad = np.arctan2(r[:, 1], r[:, 0])
-    lat = 90.0 - np.degrees(colat)
-    lon = np.degrees(lon_rad)
+    track = _track_of(data, residual_body_nt)
     fold, n_folds = _training_folds(data.t_utc_s, train)
-
-    def box(mask: BoolArray) -> tuple[float, float, float, float]:
-        return (
-            float(lat[mask].min()),
-            float(lat[mask].max()),
-            float(lon[mask].min()),
-            float(lon[mask].max()),
-        )
-
-    def scale(v: FloatArray, lo: float, hi: float) -> FloatArray:
-        return np.clip(2.0 * (v - lo) / max(hi - lo, 1e-9) - 1.0, -1.0, 1.0)
-
-    def legendre_fit(mask: BoolArray) -> tuple[FloatArray, FloatArray, BoolArray]:
-        """Patent step 2 on ``mask``: (prediction everywhere, zero outside its box; coef; box)."""
-        lo_lat, hi_lat, lo_lon, hi_lon = box(mask)
-        design = legendre_design(scale(lat, lo_lat, hi_lat), scale(lon, lo_lon, hi_lon))
-        coef = np.linalg.lstsq(design[mask], r_nec[mask], rcond=None)[0]
-        inside = (lat >= lo_lat) & (lat <= hi_lat) & (lon >= lo_lon) & (lon <= hi_lon)
-        return np.where(inside[:, None], design @ coef, 0.0), coef, inside
-
-    # Stage candidates, cross-validated over the training folds.
-    cv_ms: dict[str, float] = {"none": float(np.mean(np.sum(r_nec[train] ** 2, axis=1)))}
-    if n_folds >= 2:
-        sse = 0.0
-        for f in range(n_folds):
-            pred, _, _ = legendre_fit(train & (fold != f))
-            left = train & (fold == f)
-            sse += float(np.sum((r_nec[left] - pred[left]) ** 2))
-        cv_ms["legendre"] = sse / int(train.sum())
-    sh = _sh_stage(data.t_utc_s, radius, colat, lon_rad, r_nec, train, fold, n_folds)
-    sh_pred = np.zeros_like(r_nec)
-    if sh["degree"] > 0:
-        deg = int(sh["degree"])
-        cv_ms["spherical_harmonic"] = sh["cv_rms_nt"] ** 2
-        sh_pred = synth_internal_nec_nt(
-            to_degree_blocks(sh["coefficients"], deg), radius, np.degrees(colat), lon, nmax=deg
-        )
-    leg, coef, inside_box = legendre_fit(train)
-    stage = min(cv_ms, key=lambda s: cv_ms[s])
-    stage_pred = {"none": np.zeros_like(r_nec), "legendre": leg, "spherical_harmonic": sh_pred}[
-        stage
-    ]
-    rest = r_nec - stage_pred
+    stages = _fit_stages(data, track, train, fold, n_folds)
+    stage_pred = stages.prediction()
+    rest = track.r_nec - stage_pred
 
     # Patent step 3: the BP network on what the stage leaves.
-    lo_lat, hi_lat, lo_lon, hi_lon = box(train)
+    lo_lat, hi_lat, lo_lon, hi_lon = track.box(train)
     x, names = _network_inputs(
-        data, scale(lat, lo_lat, hi_lat), scale(lon, lo_lon, hi_lon), radius, train, scale
+        data,
+        _unit_scale(track.lat, lo_lat, hi_lat),
+        _unit_scale(track.lon, lo_lon, hi_lon),
+        track.radius,
+        train,
+        _unit_scale,
     )
     net, inside, val_without, val_with, net_used = _network_stage(
-        x, rest, train, fold, n_folds, inside_box, rng, max_nfev
+        x, rest, train, fold, n_folds, stages.inside_box, rng, max_nfev
     )
     after_nec = stage_pred + (net if net_used else 0.0)
 
     def body(v_nec: FloatArray) -> FloatArray:
-        v_itrs = np.einsum("nji,nj->ni", basis, v_nec)
+        v_itrs = np.einsum("nji,nj->ni", track.basis, v_nec)
         return np.einsum("nij,nj->ni", data.rot_itrs_to_body, v_itrs)
 
     def held(v_nec: FloatArray) -> float:
@@ -536,14 +494,157 @@ def learned_field_model(
 
     before = norm_rms_nt(residual_body_nt[holdout])
     after = held(after_nec)
-    deg = int(sh["degree"])
+    deg = int(stages.sh["degree"])
     summary = {
+        **_stage_summary(stages),
+        "hidden_nodes": N_HIDDEN,
+        "inputs": names,
+        "network_used": net_used,
+        "network_validation_rms_nt": {"without": val_without, "with": val_with},
+        "region_deg": {"lat": [lo_lat, hi_lat], "lon": [lo_lon, hi_lon]},
+        "holdout_rms_before_nt": before,
+        "holdout_rms_legendre_nt": held(stages.legendre_pred),
+        "holdout_rms_sh_nt": held(stages.sh_pred) if deg else before,
+        "holdout_rms_stage_nt": held(stage_pred),
+        "holdout_rms_after_nt": after,
+        "shrink": before / max(after, 1e-12),
+        "holdout_fraction_inside_region": float(np.mean(inside[holdout])) if holdout.any() else 0.0,
+        "legendre_coefficients_nt": {
+            comp: stages.legendre_coef[:, k].round(4).tolist()
+            for k, comp in enumerate(("N", "E", "C"))
+        },
+    }
+    return summary, body(after_nec)
+
+
+@dataclass(frozen=True)
+class _Track:
+    """The residual in the local NEC frame and where each sample is."""
+
+    basis: FloatArray  # (N, 3, 3): ITRS to NEC
+    r_nec: FloatArray  # (N, 3) [nT]
+    radius: FloatArray  # [km]
+    colat: FloatArray  # [rad]
+    lon_rad: FloatArray  # [rad]
+    lat: FloatArray  # geocentric latitude [deg]
+    lon: FloatArray  # [deg]
+
+    def box(self, mask: BoolArray) -> tuple[float, float, float, float]:
+        """The latitude and longitude box of the samples ``mask`` [deg]."""
+        return (
+            float(self.lat[mask].min()),
+            float(self.lat[mask].max()),
+            float(self.lon[mask].min()),
+            float(self.lon[mask].max()),
+        )
+
+
+def _track_of(data: DiagnosisData, residual_body_nt: FloatArray) -> _Track:
+    """The residual ``residual_body_nt`` (body axes) in NEC, and the samples' coordinates."""
+    r = data.r_itrs_km
+    basis = _nec_basis(r)
+    r_itrs = np.einsum("nji,nj->ni", data.rot_itrs_to_body, residual_body_nt)
+    radius = np.linalg.norm(r, axis=1)
+    colat = np.arccos(np.clip(r[:, 2] / radius, -1.0, 1.0))
+    lon_rad = np.arctan2(r[:, 1], r[:, 0])
+    return _Track(
+        basis=basis,
+        r_nec=np.einsum("nij,nj->ni", basis, r_itrs),
+        radius=radius,
+        colat=colat,
+        lon_rad=lon_rad,
+        lat=90.0 - np.degrees(colat),
+        lon=np.degrees(lon_rad),
+    )
+
+
+def _unit_scale(v: FloatArray, lo: float, hi: float) -> FloatArray:
+    """``v`` mapped from ``[lo, hi]`` to ``[-1, 1]`` (clipped)."""
+    return np.clip(2.0 * (v - lo) / max(hi - lo, 1e-9) - 1.0, -1.0, 1.0)
+
+
+def _legendre_fit(track: _Track, mask: BoolArray) -> tuple[FloatArray, FloatArray, BoolArray]:
+    """Patent step 2 on ``mask``: (prediction everywhere, zero outside its box; coef; box)."""
+    lo_lat, hi_lat, lo_lon, hi_lon = track.box(mask)
+    design = legendre_design(
+        _unit_scale(track.lat, lo_lat, hi_lat), _unit_scale(track.lon, lo_lon, hi_lon)
+    )
+    coef = np.asarray(np.linalg.lstsq(design[mask], track.r_nec[mask], rcond=None)[0], float)
+    lat, lon = track.lat, track.lon
+    inside = (lat >= lo_lat) & (lat <= hi_lat) & (lon >= lo_lon) & (lon <= hi_lon)
+    return np.asarray(np.where(inside[:, None], design @ coef, 0.0), float), coef, inside
+
+
+@dataclass(frozen=True)
+class _Stages:
+    """Step 2's candidates fitted on the training blocks, and the one cross-validation chose."""
+
+    cv_ms: dict[str, float]  # mean square per stage over the left-out folds [nT^2]
+    sh: dict[str, Any]  # :func:`_sh_stage`'s summary
+    sh_pred: FloatArray  # NEC [nT]
+    legendre_pred: FloatArray  # NEC [nT]
+    legendre_coef: FloatArray
+    inside_box: BoolArray
+    chosen: str
+
+    def prediction(self) -> FloatArray:
+        """The chosen stage's prediction, NEC [nT]."""
+        return {
+            "none": np.zeros_like(self.legendre_pred),
+            "legendre": self.legendre_pred,
+            "spherical_harmonic": self.sh_pred,
+        }[self.chosen]
+
+
+def _fit_stages(
+    data: DiagnosisData,
+    track: _Track,
+    train: BoolArray,
+    fold: npt.NDArray[np.intp],
+    n_folds: int,
+) -> _Stages:
+    """The regional Legendre and the global spherical-harmonic stage, cross-validated over the
+    training folds against no stage."""
+    r_nec = track.r_nec
+    cv_ms: dict[str, float] = {"none": float(np.mean(np.sum(r_nec[train] ** 2, axis=1)))}
+    if n_folds >= 2:
+        sse = 0.0
+        for f in range(n_folds):
+            pred, _, _ = _legendre_fit(track, train & (fold != f))
+            left = train & (fold == f)
+            sse += float(np.sum((r_nec[left] - pred[left]) ** 2))
+        cv_ms["legendre"] = sse / int(train.sum())
+    sh = _sh_stage(
+        data.t_utc_s, track.radius, track.colat, track.lon_rad, r_nec, train, fold, n_folds
+    )
+    sh_pred = np.zeros_like(r_nec)
+    if sh["degree"] > 0:
+        deg = int(sh["degree"])
+        cv_ms["spherical_harmonic"] = sh["cv_rms_nt"] ** 2
+        sh_pred = synth_internal_nec_nt(
+            to_degree_blocks(sh["coefficients"], deg),
+            track.radius,
+            np.degrees(track.colat),
+            track.lon,
+            nmax=deg,
+        )
+    leg, coef, inside_box = _legendre_fit(track, train)
+    stage = min(cv_ms, key=lambda s: cv_ms[s])
+    return _Stages(cv_ms, sh, sh_pred, leg, coef, inside_box, stage)
+
+
+def _stage_summary(stages: _Stages) -> dict[str, Any]:
+    """The summary's keys about step 2: the method, the chosen stage, the cross-validation and
+    the spherical-harmonic stage's degree, damping and spectrum."""
+    sh = stages.sh
+    deg = int(sh["degree"])
+    return {
         "method": (
             "CN109855623A: regional Legendre polynomials + BP network, with a global "
             "internal spherical-harmonic stage chosen by cross-validation on the training blocks"
         ),
-        "stage_chosen": stage,
-        "cv_rms_nt": {k: float(np.sqrt(v)) for k, v in cv_ms.items()},
+        "stage_chosen": stages.chosen,
+        "cv_rms_nt": {k: float(np.sqrt(v)) for k, v in stages.cv_ms.items()},
         "legendre_order": LEGENDRE_ORDER,
         "sh_degree": deg,
         "sh_degree_cap": int(sh["cap"]),
@@ -552,23 +653,7 @@ def learned_field_model(
         "sh_lowes_spectrum_nt2": (
             [round(v, 4) for v in _lowes_spectrum(sh["coefficients"], deg)] if deg else []
         ),
-        "hidden_nodes": N_HIDDEN,
-        "inputs": names,
-        "network_used": net_used,
-        "network_validation_rms_nt": {"without": val_without, "with": val_with},
-        "region_deg": {"lat": [lo_lat, hi_lat], "lon": [lo_lon, hi_lon]},
-        "holdout_rms_before_nt": before,
-        "holdout_rms_legendre_nt": held(leg),
-        "holdout_rms_sh_nt": held(sh_pred) if deg else before,
-        "holdout_rms_stage_nt": held(stage_pred),
-        "holdout_rms_after_nt": after,
-        "shrink": before / max(after, 1e-12),
-        "holdout_fraction_inside_region": float(np.mean(inside[holdout])) if holdout.any() else 0.0,
-        "legendre_coefficients_nt": {
-            comp: coef[:, k].round(4).tolist() for k, comp in enumerate(("N", "E", "C"))
-        },
     }
-    return summary, body(after_nec)
 
 
 def _network_inputs(

@@ -138,63 +138,21 @@ def diagnosis_data(
     NotEnoughDataError
         Fewer than two samples.
     """
-    from orbitcal import frames
-    from orbitcal.sun import illumination_conical, sun_position_gcrs_km
     from orbitcal.truth import truth_for_telemetry
 
-    field = options.field
+    q_wxyz = _checked_quaternions(telemetry)
     attitude_frame = options.attitude_frame
     crust_model = options.crust_model
-    if telemetry.q_wxyz is None:
-        raise BadInputError(
-            "the diagnosis needs attitude quaternions (q_w, q_x, q_y, q_z) to compare vectors",
-            field="q_w",
-        )
-    if np.size(telemetry.t_utc_s) < 2:
-        raise NotEnoughDataError(
-            f"the diagnosis needs a time series and got {np.size(telemetry.t_utc_s)} sample(s); "
-            "provide hours of telemetry (several orbits)"
-        )
-    truth = truth_for_telemetry(telemetry, orbit=orbit, attitude_frame=attitude_frame, field=field)
+    truth = truth_for_telemetry(
+        telemetry, orbit=orbit, attitude_frame=attitude_frame, field=options.field
+    )
     t = np.asarray(telemetry.t_utc_s, dtype=float)
-    rot = rotation_itrs_to_body(t, np.asarray(telemetry.q_wxyz), attitude_frame=attitude_frame)
+    rot = rotation_itrs_to_body(t, q_wxyz, attitude_frame=attitude_frame)
     r_itrs = np.asarray(truth.r_itrs_km, dtype=float)
     b_ref_body = np.einsum("nij,nj->ni", rot, truth.b_itrs_nt)
-
-    r_gcrs = frames.itrs_to_gcrs(r_itrs, t)
-    sun_gcrs = sun_position_gcrs_km(t)
-    illumination = np.asarray(illumination_conical(r_gcrs, sun_gcrs), dtype=float)
-    s_gcrs = sun_gcrs - r_gcrs
-    s_itrs = frames.gcrs_to_itrs(s_gcrs / np.linalg.norm(s_gcrs, axis=1, keepdims=True), t)
-    sun_body = np.einsum("nij,nj->ni", rot, s_itrs)
-
-    names: list[str] = []
-    cols: list[FloatArray] = []
-    if telemetry.temperature_c is not None:
-        names.append("temperature")
-        cols.append(np.asarray(telemetry.temperature_c, dtype=float))
-    if telemetry.mtq_am2 is not None:
-        for k, axis in enumerate("xyz"):
-            names.append(f"mtq_{axis}")
-            cols.append(np.asarray(telemetry.mtq_am2[:, k], dtype=float))
-    for key, values in sorted(telemetry.hk.items()):
-        arr = np.asarray(values)
-        if arr.dtype.kind in "fiu" and np.all(np.isfinite(arr)):
-            names.append(key)
-            cols.append(arr.astype(float))
-    x_hk = np.column_stack(cols) if cols else np.zeros((0, 0))
-
-    rc_index = None
-    b_ext_body = None
-    if options.external_model:
-        try:
-            from orbitcal.field.external import ring_current_field
-
-            rc_e, rc_i = ring_current_field().rc_nt(t)
-            rc_index = np.asarray(rc_e + rc_i, dtype=float)
-            b_ext_body = field_body_nt("RC", t, r_itrs, rot)
-        except ValueError as exc:
-            warnings.warn(f"RC index not used: {exc}", stacklevel=2)
+    illumination, sun_body = _sun_in_body(t, r_itrs, rot)
+    x_hk, names = _housekeeping(telemetry)
+    rc_index, b_ext_body = _ring_current(t, r_itrs, rot) if options.external_model else (None, None)
     b_crust_body = (
         field_body_nt(crust_model, t, r_itrs, rot, knot_spacing_s=CRUST_KNOT_SPACING_S)
         if crust_model
@@ -219,3 +177,73 @@ def diagnosis_data(
         calibration_prior=calibration_prior,
         positions_measured=telemetry.r_itrs_km is not None,
     )
+
+
+def _checked_quaternions(telemetry: Telemetry) -> FloatArray:
+    """The table's quaternions; the typed error a table without them or of one sample
+    deserves."""
+    if telemetry.q_wxyz is None:
+        raise BadInputError(
+            "the diagnosis needs attitude quaternions (q_w, q_x, q_y, q_z) to compare vectors",
+            field="q_w",
+        )
+    if np.size(telemetry.t_utc_s) < 2:
+        raise NotEnoughDataError(
+            f"the diagnosis needs a time series and got {np.size(telemetry.t_utc_s)} sample(s); "
+            "provide hours of telemetry (several orbits)"
+        )
+    return np.asarray(telemetry.q_wxyz)
+
+
+def _sun_in_body(
+    t: FloatArray, r_itrs_km: FloatArray, rot: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """The visible fraction of the solar disc (conical shadow) [-] and the unit vector towards
+    the Sun in the body frame [-], per sample."""
+    from orbitcal import frames
+    from orbitcal.sun import illumination_conical, sun_position_gcrs_km
+
+    r_gcrs = frames.itrs_to_gcrs(r_itrs_km, t)
+    sun_gcrs = sun_position_gcrs_km(t)
+    illumination = np.asarray(illumination_conical(r_gcrs, sun_gcrs), dtype=float)
+    s_gcrs = sun_gcrs - r_gcrs
+    s_itrs = frames.gcrs_to_itrs(s_gcrs / np.linalg.norm(s_gcrs, axis=1, keepdims=True), t)
+    return illumination, np.einsum("nij,nj->ni", rot, s_itrs)
+
+
+def _housekeeping(telemetry: Telemetry) -> tuple[FloatArray, list[str]]:
+    """The housekeeping regressors ``x_hk`` (N, k) and their names: the temperature, the
+    magnetorquer dipoles and every finite numeric ``hk_*`` column."""
+    names: list[str] = []
+    cols: list[FloatArray] = []
+    if telemetry.temperature_c is not None:
+        names.append("temperature")
+        cols.append(np.asarray(telemetry.temperature_c, dtype=float))
+    if telemetry.mtq_am2 is not None:
+        for k, axis in enumerate("xyz"):
+            names.append(f"mtq_{axis}")
+            cols.append(np.asarray(telemetry.mtq_am2[:, k], dtype=float))
+    for key, values in sorted(telemetry.hk.items()):
+        arr = np.asarray(values)
+        if arr.dtype.kind in "fiu" and np.all(np.isfinite(arr)):
+            names.append(key)
+            cols.append(arr.astype(float))
+    return (np.column_stack(cols) if cols else np.zeros((0, 0))), names
+
+
+def _ring_current(
+    t: FloatArray, r_itrs_km: FloatArray, rot: FloatArray
+) -> tuple[FloatArray | None, FloatArray | None]:
+    """The RC index at the samples [nT] and the RC-driven field in the body frame [nT]; both
+    None, with a warning, when the index does not cover the samples."""
+    try:
+        from orbitcal.field.external import ring_current_field
+
+        rc_e, rc_i = ring_current_field().rc_nt(t)
+        rc_index = np.asarray(rc_e + rc_i, dtype=float)
+        b_ext_body = field_body_nt("RC", t, r_itrs_km, rot)
+    except ValueError as exc:
+        # stacklevel 3: the warning names diagnosis_data's caller
+        warnings.warn(f"RC index not used: {exc}", stacklevel=3)
+        return None, None
+    return rc_index, b_ext_body

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from orbitcal.diagnose.attribution import Attribution
+from orbitcal.diagnose.attribution import Attribution, EffectScore, SplitFit
 from orbitcal.diagnose.effects import EFFECT_NAMES, DiagnosisData, get_effect
 
 __all__ = ["BASELINE_METHOD", "build_report"]
@@ -122,100 +122,114 @@ def build_report(
     ``where`` locates the calibration-only residual; ``where_final`` (optional) locates what the
     selected effects leave, e.g. the auroral part of a storm once the ring current is modelled.
     """
-    effects = []
-    for e in att.effects:
-        eff = get_effect(e.name)
-        effects.append(
-            {
-                "name": e.name,
-                "significant": bool(e.significant),
-                "holdout_rms_before_nt": _rms(e.holdout_rms_before_nt),
-                "holdout_rms_after_nt": _rms(e.holdout_rms_after_nt),
-                "shrink": _num(e.shrink),
-                "params": _clean(e.params),
-                "p_value": float(f"{e.p_value:.3g}"),
-                "unique_rms_increase_nt": _rms(e.unique_rms_increase_nt),
-                "selection_step": e.step,
-                "witness": eff.witness,
-                "status": (
-                    "implausible"
-                    if e.implausible
-                    else ("selected" if e.significant else "not significant")
-                ),
-                "implausible_reason": e.implausible,
-                "param_intervals_90": _clean(e.intervals),
-                "shrink_interval_90": _clean(list(e.shrink_interval))
-                if e.shrink_interval is not None
-                else None,
-                "absorbed_by_calibration_fraction": _num(e.absorbed_fraction)
-                if e.absorbed_fraction is not None
-                else None,
-            }
-        )
     separation = _separation(att)
-    t = data.t_utc_s
-    from orbitcal.timescales import utc_s_to_iso
-
-    start, end = utc_s_to_iso([float(t[0]), float(t[-1])])
-    held = att.holdout
     report: dict[str, Any] = {
-        "baseline": {
-            "method": BASELINE_METHOD,
-            "holdout_rms_nt": _rms(att.baseline_rms_nt),
-            "norm_holdout_rms_nt": _num(att.baseline_rms_nt),
-            "train_rms_nt": _rms(att.baseline_train_rms_nt),
-            "n_holdout": int(np.count_nonzero(att.holdout)),
-            "reference_field": data.reference_field,
-            "calibration_prior": (
-                data.calibration_prior.summary() if data.calibration_prior is not None else None
-            ),
-        },
+        "baseline": _baseline_section(data, att),
         "verdict": att.verdict,
         "verdict_confidence": _num(att.verdict_confidence)
         if att.verdict_confidence is not None
         else None,
         "verdict_status": _verdict_status(att, separation),
         "separation": _clean(separation),
-        "effects": effects,
+        "effects": [_effect_entry(e) for e in att.effects],
         "where": _clean(where),
-        "final": {
-            "effects": list(att.selected),
-            # selected by a forward step, removed again when re-tested beside the others
-            "dropped": list(att.dropped),
-            "holdout_rms_nt": _rms(att.final_rms_nt),
-            "norm_holdout_rms_nt": _num(att.final_rms_nt),
-            "shrink": _num(att.baseline_rms_nt / max(att.final_rms_nt, 1e-12)),
-            "where": _clean(where_final) if where_final is not None else None,
-        },
-        "split_fits": [
-            _clean(
-                {
-                    "name": s.name,
-                    "labels": s.labels,
-                    "offsets_nt": s.offsets_nt,
-                    "scales": s.scales,
-                    "max_offset_difference_nt": s.max_offset_difference_nt,
-                    "z": s.z,
-                    "flagged": s.flagged,
-                }
-            )
-            for s in att.split_fits
-        ],
-        "data": {
-            "start": start,
-            "end": end,
-            "n": int(data.n),
-            "n_train": int((~held).sum()),
-            "n_holdout": int(held.sum()),
-            "holdout": "later time blocks (last 30 % of the span) that no fit saw",
-            "candidates_without_witness": sorted(set(EFFECT_NAMES) - {e.name for e in att.effects}),
-            "crust_model": data.crust_model,
-        },
+        "final": _final_section(att, where_final),
+        "split_fits": [_split_fit_entry(s) for s in att.split_fits],
+        "data": _data_section(data, att),
     }
     if learned is not None:
         report["learned"] = _clean(learned)
     report["provenance"] = _provenance(data, att)
     return report
+
+
+def _effect_entry(e: EffectScore) -> dict[str, Any]:
+    """One effect's entry of the report's ``effects``."""
+    return {
+        "name": e.name,
+        "significant": bool(e.significant),
+        "holdout_rms_before_nt": _rms(e.holdout_rms_before_nt),
+        "holdout_rms_after_nt": _rms(e.holdout_rms_after_nt),
+        "shrink": _num(e.shrink),
+        "params": _clean(e.params),
+        "p_value": float(f"{e.p_value:.3g}"),
+        "unique_rms_increase_nt": _rms(e.unique_rms_increase_nt),
+        "selection_step": e.step,
+        "witness": get_effect(e.name).witness,
+        "status": (
+            "implausible" if e.implausible else ("selected" if e.significant else "not significant")
+        ),
+        "implausible_reason": e.implausible,
+        "param_intervals_90": _clean(e.intervals),
+        "shrink_interval_90": _clean(list(e.shrink_interval))
+        if e.shrink_interval is not None
+        else None,
+        "absorbed_by_calibration_fraction": _num(e.absorbed_fraction)
+        if e.absorbed_fraction is not None
+        else None,
+    }
+
+
+def _baseline_section(data: DiagnosisData, att: Attribution) -> dict[str, Any]:
+    """The report's ``baseline``: the calibration alone."""
+    return {
+        "method": BASELINE_METHOD,
+        "holdout_rms_nt": _rms(att.baseline_rms_nt),
+        "norm_holdout_rms_nt": _num(att.baseline_rms_nt),
+        "train_rms_nt": _rms(att.baseline_train_rms_nt),
+        "n_holdout": int(np.count_nonzero(att.holdout)),
+        "reference_field": data.reference_field,
+        "calibration_prior": (
+            data.calibration_prior.summary() if data.calibration_prior is not None else None
+        ),
+    }
+
+
+def _final_section(att: Attribution, where_final: dict[str, Any] | None) -> dict[str, Any]:
+    """The report's ``final``: the selected effects' model."""
+    return {
+        "effects": list(att.selected),
+        # selected by a forward step, removed again when re-tested beside the others
+        "dropped": list(att.dropped),
+        "holdout_rms_nt": _rms(att.final_rms_nt),
+        "norm_holdout_rms_nt": _num(att.final_rms_nt),
+        "shrink": _num(att.baseline_rms_nt / max(att.final_rms_nt, 1e-12)),
+        "where": _clean(where_final) if where_final is not None else None,
+    }
+
+
+def _split_fit_entry(s: SplitFit) -> Any:
+    """One entry of the report's ``split_fits``."""
+    return _clean(
+        {
+            "name": s.name,
+            "labels": s.labels,
+            "offsets_nt": s.offsets_nt,
+            "scales": s.scales,
+            "max_offset_difference_nt": s.max_offset_difference_nt,
+            "z": s.z,
+            "flagged": s.flagged,
+        }
+    )
+
+
+def _data_section(data: DiagnosisData, att: Attribution) -> dict[str, Any]:
+    """The report's ``data``: the span, the sample counts, the candidates without witness."""
+    from orbitcal.timescales import utc_s_to_iso
+
+    t = data.t_utc_s
+    start, end = utc_s_to_iso([float(t[0]), float(t[-1])])
+    held = att.holdout
+    return {
+        "start": start,
+        "end": end,
+        "n": int(data.n),
+        "n_train": int((~held).sum()),
+        "n_holdout": int(held.sum()),
+        "holdout": "later time blocks (last 30 % of the span) that no fit saw",
+        "candidates_without_witness": sorted(set(EFFECT_NAMES) - {e.name for e in att.effects}),
+        "crust_model": data.crust_model,
+    }
 
 
 def _provenance(data: DiagnosisData, att: Attribution) -> dict[str, Any]:

@@ -130,53 +130,85 @@ def where_analysis(
     }
     out["scalar_to_vector"] = round(out["scalar_rms_nt"] / max(out["norm_rms_nt"], 1e-12), 4)
 
+    bands = _latitude_bands(data, r, b_hat)
+    out["magnetic_latitude"] = bands
+    lit = _sunlit(data)
+    if lit is not None:
+        out["sunlit_eclipse"] = {
+            "sunlit": _stats(r, b_hat, lit),
+            "eclipse": _stats(r, b_hat, ~lit),
+        }
+    out["local_time"], out["orbit_phase"] = _local_time_and_phase(data, r, b_hat)
+    out["time"] = _time_blocks(data, r, b_hat, h, n_time_blocks)
+    out["frequency"] = _dominant_periods(data.t_utc_s, r)
+    out["concentration"] = _concentration(r, bands, out.get("sunlit_eclipse"))
+    return out
+
+
+def _latitude_bands(data: DiagnosisData, r: FloatArray, b_hat: FloatArray) -> list[dict[str, Any]]:
+    """The residual's statistics per band of |magnetic latitude| (bands without samples left
+    out)."""
     amlat = np.abs(data.mlat_deg)
     bands: list[dict[str, Any]] = []
     for lo, hi in MLAT_BANDS_DEG:
         m = (amlat >= lo) & (amlat < hi if hi < 90 else amlat <= hi)
         if m.any():
             bands.append({"band_deg": [lo, hi], **_stats(r, b_hat, m)})
-    out["magnetic_latitude"] = bands
+    return bands
 
-    lit: BoolArray | None = None
+
+def _sunlit(data: DiagnosisData) -> BoolArray | None:
+    """Sunlit samples (more than half the solar disc visible), or None without the Sun."""
     if data.illumination is not None:
-        lit = np.asarray(data.illumination > 0.5)
-    elif data.sunlit is not None:
-        lit = np.asarray(data.sunlit, dtype=bool)
-    if lit is not None:
-        out["sunlit_eclipse"] = {
-            "sunlit": _stats(r, b_hat, lit),
-            "eclipse": _stats(r, b_hat, ~lit),
-        }
+        return np.asarray(data.illumination > 0.5)
+    if data.sunlit is not None:
+        return np.asarray(data.sunlit, dtype=bool)
+    return None
 
+
+def _local_time_and_phase(
+    data: DiagnosisData, r: FloatArray, b_hat: FloatArray
+) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """The residual's statistics per 3 h of local time and per 45 deg of orbit phase."""
     lt = local_time_h(data.t_utc_s, data.r_itrs_km)
-    out["local_time"] = [
+    local_time = [
         {"hours": [a, a + 3], **_stats(r, b_hat, (lt >= a) & (lt < a + 3))}
         for a in range(0, 24, 3)
         if np.any((lt >= a) & (lt < a + 3))
     ]
     phase = np.degrees(data.orbit_phase_rad) % 360.0
-    out["orbit_phase"] = [
+    orbit_phase = [
         {"deg": [a, a + 45], **_stats(r, b_hat, (phase >= a) & (phase < a + 45))}
         for a in range(0, 360, 45)
         if np.any((phase >= a) & (phase < a + 45))
     ]
+    return local_time, orbit_phase
+
+
+def _time_blocks(
+    data: DiagnosisData, r: FloatArray, b_hat: FloatArray, holdout: BoolArray, n_blocks: int
+) -> list[dict[str, Any]]:
+    """The residual's statistics per equal-duration time block, with whether it is held out."""
     t = data.t_utc_s
     span = float(t[-1] - t[0]) or 1.0
-    block = np.minimum(((t - t[0]) / span * n_time_blocks).astype(int), n_time_blocks - 1)
-    out["time"] = [
+    block = np.minimum(((t - t[0]) / span * n_blocks).astype(int), n_blocks - 1)
+    return [
         {
             "block": b,
             "start_utc_s": float(t[block == b][0]),
-            "held_out": bool(np.all(h[block == b])),
+            "held_out": bool(np.all(holdout[block == b])),
             **_stats(r, b_hat, block == b),
         }
-        for b in range(n_time_blocks)
+        for b in range(n_blocks)
         if np.any(block == b)
     ]
-    out["frequency"] = _dominant_periods(t, r)
 
-    # Where is the excess? The band/condition whose mean square most exceeds the overall one.
+
+def _concentration(
+    r: FloatArray, bands: list[dict[str, Any]], sunlit_eclipse: dict[str, Any] | None
+) -> str:
+    """Where the excess is: the band or condition whose mean square most exceeds the overall
+    one, if by more than 10 % of the total ("everywhere" otherwise)."""
     overall = norm_rms_nt(r) ** 2
     candidates: list[tuple[float, str]] = []
     for bnd in bands:
@@ -184,10 +216,9 @@ def where_analysis(
         rms_b = float(bnd["rms_nt"])
         lo_b, hi_b = bnd["band_deg"]
         candidates.append((n_b * (rms_b**2 - overall), f"|mlat| {lo_b:g}-{hi_b:g} deg"))
-    if lit is not None:
+    if sunlit_eclipse is not None:
         for key in ("sunlit", "eclipse"):
-            st = out["sunlit_eclipse"][key]
+            st = sunlit_eclipse[key]
             candidates.append((float(st["n"]) * (float(st["rms_nt"]) ** 2 - overall), key))
     best = max(candidates, default=(0.0, "everywhere"))
-    out["concentration"] = best[1] if best[0] > 0.1 * overall * r.shape[0] else "everywhere"
-    return out
+    return best[1] if best[0] > 0.1 * overall * r.shape[0] else "everywhere"

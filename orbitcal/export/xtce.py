@@ -106,10 +106,21 @@ def linear_postfix(
 def render_xtce(form: AffineForm | NetworkForm, info: ProductInfo, options: ExportOptions) -> bytes:
     """The SpaceSystem as UTF-8 XML bytes."""
     ET.register_namespace("xtce", NS)
-    sys_ = options.space_system
-    exact = is_exact_affine(form)
-    hk_cols = list(form.hk_names)
-    hk_params = [options.hk_parameter(c) for c in hk_cols]
+    hk_params = [options.hk_parameter(c) for c in form.hk_names]
+    _check_names_differ(options, hk_params)
+    root = ET.Element(_T + "SpaceSystem", {"name": options.space_system})
+    _describe(root, form, info, options)
+    tm = _sub(root, "TelemetryMetaData")
+    _parameter_types(tm)
+    _parameters(tm, form, info, options, hk_params)
+    _algorithms(tm, form, info, options, hk_params)
+    ET.indent(root, space="  ")
+    body = ET.tostring(root, encoding="unicode")
+    return ('<?xml version="1.0" encoding="UTF-8"?>\n' + body + "\n").encode("utf-8")
+
+
+def _check_names_differ(options: ExportOptions, hk_params: list[str]) -> None:
+    """Raise when a raw, housekeeping or calibrated parameter name is given twice."""
     names = [*options.raw_names, *hk_params, *options.cal_names]
     names += [lin_name(n) for n in options.cal_names]
     repeated = sorted({n for n in names if names.count(n) > 1})
@@ -119,7 +130,13 @@ def render_xtce(form: AffineForm | NetworkForm, info: ProductInfo, options: Expo
             "(raw, housekeeping and calibrated names)",
             field="hk_names",
         )
-    root = ET.Element(_T + "SpaceSystem", {"name": sys_})
+
+
+def _describe(
+    root: ET.Element, form: AffineForm | NetworkForm, info: ProductInfo, options: ExportOptions
+) -> None:
+    """The SpaceSystem's LongDescription and Header with its notes (the product, what the
+    affine part carries and what it loses)."""
     desc = _sub(root, "LongDescription")
     desc.text = (
         f"orbitcal magnetometer calibration of {info.spacecraft}, version {info.version} "
@@ -141,6 +158,7 @@ def render_xtce(form: AffineForm | NetworkForm, info: ProductInfo, options: Expo
         else "the network's first-order expansion about the centre of its training inputs "
         "in the MathAlgorithms *_LIN (the JavaScript algorithm carries the whole network)"
     )
+    exact = is_exact_affine(form)
     for line in info.lines() + loss_lines(
         info, carries=carries, exact=exact, loss=options.loss, which="affine"
     ):
@@ -151,7 +169,9 @@ def render_xtce(form: AffineForm | NetworkForm, info: ProductInfo, options: Expo
             f"{options.loss.full_rms_nt:.6g} nT"
         )
 
-    tm = _sub(root, "TelemetryMetaData")
+
+def _parameter_types(tm: ET.Element) -> None:
+    """The parameter types: field [nT], housekeeping, coefficient, version, text."""
     types = _sub(tm, "ParameterTypeSet")
     field_t = _sub(types, "FloatParameterType", name="MagneticField_nT", sizeInBits="64")
     _sub(_sub(field_t, "UnitSet"), "Unit").text = "nT"
@@ -160,6 +180,16 @@ def render_xtce(form: AffineForm | NetworkForm, info: ProductInfo, options: Expo
     _sub(types, "IntegerParameterType", name="Version", sizeInBits="32", signed="false")
     _sub(types, "StringParameterType", name="Text")
 
+
+def _parameters(
+    tm: ET.Element,
+    form: AffineForm | NetworkForm,
+    info: ProductInfo,
+    options: ExportOptions,
+    hk_params: list[str],
+) -> None:
+    """The ParameterSet: raw and housekeeping (telemetered), calibrated and their affine parts
+    (derived), the coefficients (local); names starting with ``/`` are the mission's own."""
     params = _sub(tm, "ParameterSet")
 
     def param(name: str, type_ref: str, source: str, initial: str | None = None) -> None:
@@ -187,6 +217,17 @@ def render_xtce(form: AffineForm | NetworkForm, info: ProductInfo, options: Expo
         else:
             param(name, "Coefficient", "local", f64(value))
 
+
+def _algorithms(
+    tm: ET.Element,
+    form: AffineForm | NetworkForm,
+    info: ProductInfo,
+    options: ExportOptions,
+    hk_params: list[str],
+) -> None:
+    """The AlgorithmSet: the JavaScript MagCalibration (the whole calibration) and one
+    MathAlgorithm per axis (its affine part)."""
+    sys_ = options.space_system
     algos = _sub(tm, "AlgorithmSet")
     custom = _sub(algos, "CustomAlgorithm", name="MagCalibration")
     text = _sub(custom, "AlgorithmText", language="JavaScript")
@@ -214,7 +255,3 @@ def render_xtce(form: AffineForm | NetworkForm, info: ProductInfo, options: Expo
         trig = _sub(op, "TriggerSet")
         for raw in options.raw_names:
             _sub(trig, "OnParameterUpdateTrigger", parameterRef=raw)
-
-    ET.indent(root, space="  ")
-    body = ET.tostring(root, encoding="unicode")
-    return ('<?xml version="1.0" encoding="UTF-8"?>\n' + body + "\n").encode("utf-8")

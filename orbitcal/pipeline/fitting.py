@@ -14,7 +14,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from orbitcal.arrays import BoolArray
-from orbitcal.calibrate import METHODS, Calibration, FitData, MissingAttitudeError, fit_method
+from orbitcal.calibrate import (
+    METHODS,
+    Calibration,
+    FitData,
+    MethodSpec,
+    MissingAttitudeError,
+    fit_method,
+)
 from orbitcal.calibrate.document import calibration_to_document
 from orbitcal.calibrate.errors import TooFewSamplesError, UnknownMethodError
 from orbitcal.calibrate.holdout import later_block_split
@@ -179,13 +186,7 @@ def calibrate(
     holdout_fraction = opts.holdout_fraction
     import torch
 
-    if method not in METHODS:
-        raise UnknownMethodError(method, sorted(METHODS))
-    spec = METHODS[method]
-    if len(telemetry) == 0:
-        raise TooFewSamplesError(method, 0, 1)
-    if spec.vector and telemetry.q_wxyz is None:
-        raise MissingAttitudeError(method)
+    spec = _checked_method(method, telemetry)
     tel = telemetry.sort_by_time()
     data, field_name = fit_data_for_telemetry(
         tel, orbit=orbit, field=field, attitude_frame=attitude_frame
@@ -202,16 +203,14 @@ def calibrate(
         raise UndeterminedError(f"{method}: the data cannot determine a calibration: {why}")
     train_scores = score(cal, truth=data, rows=train)
     hold_scores = score(cal, truth=data, rows=hold) if np.any(hold) else train_scores
-    metrics: dict[str, float] = {
-        "holdout_rms_nt": hold_scores.primary(vector=spec.vector),
-        "train_rms_nt": train_scores.primary(vector=spec.vector),
-        "n_fit": float(np.count_nonzero(train)),
-        "n_holdout": float(np.count_nonzero(hold)),
-        "holdout_fraction": float(holdout_fraction),
-        "holdout_scalar_rms_nt": hold_scores.scalar_rms_nt,
-    }
-    if hold_scores.norm_rms_nt is not None:
-        metrics["holdout_norm_rms_nt"] = hold_scores.norm_rms_nt
+    metrics = _run_metrics(
+        train_scores,
+        hold_scores,
+        train,
+        hold,
+        vector=spec.vector,
+        holdout_fraction=holdout_fraction,
+    )
     document = calibration_to_document(
         cal,
         spacecraft=opts.spacecraft,
@@ -234,6 +233,43 @@ def calibrate(
         train_scores=train_scores,
         holdout_scores=hold_scores,
     )
+
+
+def _checked_method(method: str, telemetry: Telemetry) -> MethodSpec:
+    """The method's registry entry; the calibrator's typed errors for an unknown method, an
+    empty table, or a vector method without attitude."""
+    if method not in METHODS:
+        raise UnknownMethodError(method, sorted(METHODS))
+    spec = METHODS[method]
+    if len(telemetry) == 0:
+        raise TooFewSamplesError(method, 0, 1)
+    if spec.vector and telemetry.q_wxyz is None:
+        raise MissingAttitudeError(method)
+    return spec
+
+
+def _run_metrics(
+    train_scores: Scores,
+    hold_scores: Scores,
+    train: BoolArray,
+    hold: BoolArray,
+    *,
+    vector: bool,
+    holdout_fraction: float,
+) -> dict[str, float]:
+    """The document's ``metrics``: held-out and training RMS (the method's primary figure),
+    sample counts, the held-out scalar and (with attitude) vector-norm RMS [nT]."""
+    metrics: dict[str, float] = {
+        "holdout_rms_nt": hold_scores.primary(vector=vector),
+        "train_rms_nt": train_scores.primary(vector=vector),
+        "n_fit": float(np.count_nonzero(train)),
+        "n_holdout": float(np.count_nonzero(hold)),
+        "holdout_fraction": float(holdout_fraction),
+        "holdout_scalar_rms_nt": hold_scores.scalar_rms_nt,
+    }
+    if hold_scores.norm_rms_nt is not None:
+        metrics["holdout_norm_rms_nt"] = hold_scores.norm_rms_nt
+    return metrics
 
 
 def calibrate_telemetry(telemetry: Telemetry, **options: Any) -> tuple[Calibration, dict[str, Any]]:

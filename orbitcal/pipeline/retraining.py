@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from orbitcal.arrays import FloatArray
-from orbitcal.calibrate import METHODS, AffineCalibration, Calibration
+from orbitcal.calibrate import METHODS, AffineCalibration, Calibration, FitData
 from orbitcal.calibrate.holdout import later_block_split
 from orbitcal.errors import NotEnoughDataError
 from orbitcal.metrics import primary_key
@@ -151,17 +151,7 @@ def retrain(
     """
     from orbitcal.timescales import utc_s_to_iso
 
-    if len(telemetry) == 0:
-        raise NotEnoughDataError("a retraining needs telemetry: the table is empty")
-    tel = telemetry.sort_by_time()
-    truth_all, _ = fit_data_for_telemetry(
-        tel, orbit=orbit, field=options.field, attitude_frame=options.attitude_frame
-    )
-    assert truth_all.b_ref_mag_nt is not None
-    keep = gross_outlier_free(truth_all.b_raw_nt, truth_all.b_ref_mag_nt)
-    excluded = {} if keep.all() else {"outlier": int(np.count_nonzero(~keep))}
-    if excluded:
-        tel, truth_all = tel.select(keep), truth_all.subset(keep)
+    tel, truth_all, excluded = _outlier_free(telemetry, orbit, options)
     train, hold = later_block_split(tel.t_utc_s, options.holdout_fraction)
     if not np.any(hold):
         raise NotEnoughDataError(
@@ -176,44 +166,16 @@ def retrain(
         holdout_fraction=options.holdout_fraction,
         rng=rng,
     )
-    truth = truth_all.subset(hold)
-    doc_method = str(document.get("method", options.method))
-    vector = METHODS[doc_method].vector if doc_method in METHODS else True
-    metric = primary_key(vector=vector and truth.b_ref_body_nt is not None)
-
-    def squared(doc: dict[str, Any] | Calibration) -> FloatArray:
-        _b, vec, scalar = residuals(doc, truth)
-        if metric == "rms_nt":
-            assert vec is not None
-            return np.mean(vec**2, axis=1)
-        return scalar**2
-
     t_hold = tel.t_utc_s[hold]
     span = utc_s_to_iso([float(t_hold[0]), float(t_hold[-1])])
-    challenger_sq = squared(document)
-    champion_sq, problem = None, None
-    if champion is not None:
-        try:
-            champion_sq = squared(champion.document)
-        except ValueError as exc:  # e.g. a housekeeping column the new data lack
-            problem = str(exc)
-    identity_sq = squared(IDENTITY) if champion_sq is None else None
-    why = undetermined_reason(truth_all.b_raw_nt[train])
-    if why is not None:
-        promotion = refuse_undetermined(
-            challenger_sq, metric=metric, why=why, rule=options.rule, identity_sq_nt2=identity_sq
-        )
-    else:
-        promotion = decide_promotion(
-            challenger_sq,
-            champion_sq,
-            metric=metric,
-            champion_version=None if champion is None else champion.version,
-            span=f"{span[0]}..{span[1]}",
-            rule=options.rule,
-            champion_problem=problem,
-            identity_sq_nt2=identity_sq,
-        )
+    promotion = _promotion(
+        document,
+        champion,
+        truth_all.subset(hold),
+        options,
+        why=undetermined_reason(truth_all.b_raw_nt[train]),
+        span=f"{span[0]}..{span[1]}",
+    )
     return Retraining(
         document,
         promotion,
@@ -226,4 +188,70 @@ def retrain(
         data_start_utc_s=float(tel.t_utc_s[0]),
         data_end_utc_s=float(tel.t_utc_s[-1]),
         n_used=len(tel),
+    )
+
+
+def _outlier_free(
+    telemetry: Telemetry, orbit: Any, options: RetrainOptions
+) -> tuple[Telemetry, FitData, dict[str, int]]:
+    """The rows sorted by time without gross outliers, their fit data, and how many were left
+    out (``{"outlier": n}``, empty when none)."""
+    if len(telemetry) == 0:
+        raise NotEnoughDataError("a retraining needs telemetry: the table is empty")
+    tel = telemetry.sort_by_time()
+    truth_all, _ = fit_data_for_telemetry(
+        tel, orbit=orbit, field=options.field, attitude_frame=options.attitude_frame
+    )
+    assert truth_all.b_ref_mag_nt is not None
+    keep = gross_outlier_free(truth_all.b_raw_nt, truth_all.b_ref_mag_nt)
+    excluded = {} if keep.all() else {"outlier": int(np.count_nonzero(~keep))}
+    if excluded:
+        tel, truth_all = tel.select(keep), truth_all.subset(keep)
+    return tel, truth_all, excluded
+
+
+def _promotion(
+    document: dict[str, Any],
+    champion: Champion | None,
+    truth: FitData,
+    options: RetrainOptions,
+    *,
+    why: str | None,
+    span: str,
+) -> Promotion:
+    """The promotion decision on the held-out rows ``truth``: the challenger ``document``
+    against the champion (or the uncalibrated readings), refused when ``why`` says the data do
+    not determine the challenger."""
+    doc_method = str(document.get("method", options.method))
+    vector = METHODS[doc_method].vector if doc_method in METHODS else True
+    metric = primary_key(vector=vector and truth.b_ref_body_nt is not None)
+
+    def squared(doc: dict[str, Any] | Calibration) -> FloatArray:
+        _b, vec, scalar = residuals(doc, truth)
+        if metric == "rms_nt":
+            assert vec is not None
+            return np.mean(vec**2, axis=1)
+        return scalar**2
+
+    challenger_sq = squared(document)
+    champion_sq, problem = None, None
+    if champion is not None:
+        try:
+            champion_sq = squared(champion.document)
+        except ValueError as exc:  # e.g. a housekeeping column the new data lack
+            problem = str(exc)
+    identity_sq = squared(IDENTITY) if champion_sq is None else None
+    if why is not None:
+        return refuse_undetermined(
+            challenger_sq, metric=metric, why=why, rule=options.rule, identity_sq_nt2=identity_sq
+        )
+    return decide_promotion(
+        challenger_sq,
+        champion_sq,
+        metric=metric,
+        champion_version=None if champion is None else champion.version,
+        span=span,
+        rule=options.rule,
+        champion_problem=problem,
+        identity_sq_nt2=identity_sq,
     )

@@ -14,11 +14,15 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from orbitcal.arrays import FloatArray
 from orbitcal.telemetry import Telemetry
+
+if TYPE_CHECKING:  # pragma: no cover
+    from orbitcal.simulate.effects import Effect
 
 __all__ = [
     "SWARM_A_TLE",
@@ -126,8 +130,7 @@ def orbit_world(
     the ``-hk`` methods see exactly the regressors of the injected effects.
     """
     from orbitcal.sensor import SensorModel
-    from orbitcal.simulate import attitude_profile, make_effect, simulate_world
-    from orbitcal.simulate.effects import Effect
+    from orbitcal.simulate import attitude_profile, simulate_world
     from orbitcal.simulate.world import Housekeeping, parse_tles
 
     tle_set = parse_tles(tle)[0]
@@ -137,18 +140,9 @@ def orbit_world(
         bias_nt=random_sensor.bias_nt if bias_nt is None else np.asarray(bias_nt),
         noise_std_nt=noise_std_nt,
     )
-    effects: list[Effect] = []
-    k_cols: list[FloatArray] = []
-    if temperature:
-        kb = np.asarray(TEMPERATURE_BIAS_NT_PER_C, dtype=np.float64)
-        effects.append(
-            make_effect("temperature", bias_nt_per_c=tuple(kb), scale_per_c=(0.0, 0.0, 0.0))
-        )
-        k_cols.append(kb[:, None])
-    if magnetorquer:
-        coupling = rng.uniform(10.0, 40.0, (3, 3)) * rng.choice([-1.0, 1.0], (3, 3))
-        effects.append(make_effect("magnetorquer", coupling_nt_per_am2=tuple(coupling.reshape(-1))))
-        k_cols.append(coupling)
+    effects, k_cols = _housekeeping_effects(
+        temperature=temperature, magnetorquer=magnetorquer, rng=rng
+    )
     world = simulate_world(
         tle_set,
         start_utc_s=tle_set.epoch_utc_s,
@@ -176,6 +170,28 @@ def orbit_world(
         k_hk,
         float(noise_std_nt),
     )
+
+
+def _housekeeping_effects(
+    *, temperature: bool, magnetorquer: bool, rng: np.random.Generator
+) -> tuple[list[Effect], list[FloatArray]]:
+    """The temperature and magnetorquer effects :func:`orbit_world` injects, and the columns
+    of the housekeeping matrix each adds (before the sensor matrix) [nT per unit]."""
+    from orbitcal.simulate import make_effect
+
+    effects: list[Effect] = []
+    k_cols: list[FloatArray] = []
+    if temperature:
+        kb = np.asarray(TEMPERATURE_BIAS_NT_PER_C, dtype=np.float64)
+        effects.append(
+            make_effect("temperature", bias_nt_per_c=tuple(kb), scale_per_c=(0.0, 0.0, 0.0))
+        )
+        k_cols.append(kb[:, None])
+    if magnetorquer:
+        coupling = rng.uniform(10.0, 40.0, (3, 3)) * rng.choice([-1.0, 1.0], (3, 3))
+        effects.append(make_effect("magnetorquer", coupling_nt_per_am2=tuple(coupling.reshape(-1))))
+        k_cols.append(coupling)
+    return effects, k_cols
 
 
 def write_tle(path: str | Path, tle: str = SWARM_A_TLE) -> Path:

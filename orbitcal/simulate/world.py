@@ -371,33 +371,26 @@ def simulate_world(
     if options is not None and keywords:
         raise TypeError("simulate_world() takes options or keywords, not both")
     o = options if options is not None else WorldOptions(**keywords)
-    start_utc_s, duration_s, cadence_s = o.start_utc_s, o.duration_s, o.cadence_s
-    attitude, sensor, housekeeping, effects = o.attitude, o.sensor, o.housekeeping, o.effects
-    sensor_after, sensor_change_utc_s = o.sensor_after, o.sensor_change_utc_s
-    field, include_position, norad_id, seed = o.field, o.include_position, o.norad_id, o.seed
-    if duration_s <= 0 or cadence_s <= 0:
-        raise BadInputError("duration_s and cadence_s must be positive")
-    n = int(np.floor(duration_s / cadence_s + 1e-9))
-    if n < 2:
-        raise BadInputError(f"{n} sample(s): make duration_s at least twice cadence_s")
-    if (sensor_after is None) != (sensor_change_utc_s is None):
-        raise BadInputError("give both sensor_after and sensor_change_utc_s, or neither")
+    n = _checked_sample_count(o)
+    effects = o.effects
     tle_set = (
-        tle if isinstance(tle, TleSet) else select_tle(tle, norad_id=norad_id, at_utc_s=start_utc_s)
+        tle
+        if isinstance(tle, TleSet)
+        else select_tle(tle, norad_id=o.norad_id, at_utc_s=o.start_utc_s)
     )
-    profile: AttitudeProfile = attitude if attitude is not None else NadirLVLH()
-    housekeeping = housekeeping or Housekeeping()
+    profile: AttitudeProfile = o.attitude if o.attitude is not None else NadirLVLH()
+    housekeeping = o.housekeeping or Housekeeping()
     children = rng.spawn(3 + len(effects))
     sensor_rng, hk_rng, noise_rng, effect_rngs = children[0], children[1], children[2], children[3:]
-    sensor = sensor or SensorModel.random(rng=sensor_rng)
+    sensor = o.sensor or SensorModel.random(rng=sensor_rng)
 
-    t = np.asarray(start_utc_s + np.arange(n) * cadence_s, dtype=np.float64)
+    t = np.asarray(o.start_utc_s + np.arange(n) * o.cadence_s, dtype=np.float64)
     profile = _anchor(profile, float(t[0]))
     kin = kinematics(tle_set, profile, t)
     state = WorldState(
         tle=tle_set,
         attitude=profile,
-        field=field,
+        field=o.field,
         kin=kin,
         housekeeping=housekeeping,
         hk_rng=hk_rng,
@@ -408,43 +401,21 @@ def simulate_world(
     b_true = state.b_ref_body_nt.copy()
     for db in injected.values():
         b_true += db
-    b_raw = _measure(b_true, t, sensor, sensor_after, sensor_change_utc_s, noise_rng)
+    b_raw = _measure(b_true, t, sensor, o.sensor_after, o.sensor_change_utc_s, noise_rng)
 
     temperature = extra_hk.pop("temperature", state.temperature_c)
-    mtq = state.mtq_am2
     hk = dict(state.hk)
     hk.update({k: np.asarray(v) for k, v in extra_hk.items() if k.startswith("hk_")})
     telemetry = Telemetry(
         t_utc_s=t,
         b_raw_nt=b_raw,
         q_wxyz=kin.q_wxyz,
-        r_itrs_km=kin.r_itrs_km if include_position else None,
+        r_itrs_km=kin.r_itrs_km if o.include_position else None,
         temperature_c=np.asarray(temperature, dtype=np.float64),
-        mtq_am2=mtq,
+        mtq_am2=state.mtq_am2,
         hk=hk,
     )
-    truth: dict[str, Any] = {
-        "spacecraft": str(tle_set.norad_id),
-        "tle": {"name": tle_set.name, "line1": tle_set.line1, "line2": tle_set.line2},
-        "start": utc_s_to_iso([start_utc_s])[0],
-        "end": utc_s_to_iso([t[-1]])[0] if n else None,
-        "n": n,
-        "cadence_s": cadence_s,
-        "attitude": profile.to_dict(),
-        "attitude_frame": "GCRS",
-        "reference_field": field,
-        "sensor": sensor.to_dict(),
-        "linear": sensor.linear,
-        **_sensor_change_truth(sensor_after, sensor_change_utc_s),
-        "effects": effect_truth,
-        "verdict": effect_truth[0]["name"]
-        if len(effect_truth) == 1
-        else ("none" if not effect_truth else "multiple"),
-        "housekeeping": _jsonable(housekeeping.__dict__),
-        "eclipse_fraction": float(np.mean(state.illumination < 0.5)) if n else 0.0,
-        "b_ref_rms_nt": norm_rms_nt(state.b_ref_body_nt),
-        "seed": seed,
-    }
+    truth = _world_truth(o, tle_set, state, sensor, effect_truth, n)
     return World(
         telemetry=telemetry,
         tle=tle_set,
@@ -454,6 +425,53 @@ def simulate_world(
         injected_body_nt=injected,
         truth=truth,
     )
+
+
+def _checked_sample_count(o: WorldOptions) -> int:
+    """The number of samples ``o`` asks for; BadInputError for a span, cadence or sensor change
+    that makes no world."""
+    if o.duration_s <= 0 or o.cadence_s <= 0:
+        raise BadInputError("duration_s and cadence_s must be positive")
+    n = int(np.floor(o.duration_s / o.cadence_s + 1e-9))
+    if n < 2:
+        raise BadInputError(f"{n} sample(s): make duration_s at least twice cadence_s")
+    if (o.sensor_after is None) != (o.sensor_change_utc_s is None):
+        raise BadInputError("give both sensor_after and sensor_change_utc_s, or neither")
+    return n
+
+
+def _world_truth(
+    o: WorldOptions,
+    tle_set: TleSet,
+    state: WorldState,
+    sensor: SensorModel,
+    effect_truth: list[dict[str, Any]],
+    n: int,
+) -> dict[str, Any]:
+    """The world's ground truth: the element set, span, attitude, sensor, effects injected."""
+    t = state.kin.t_utc_s
+    return {
+        "spacecraft": str(tle_set.norad_id),
+        "tle": {"name": tle_set.name, "line1": tle_set.line1, "line2": tle_set.line2},
+        "start": utc_s_to_iso([o.start_utc_s])[0],
+        "end": utc_s_to_iso([t[-1]])[0] if n else None,
+        "n": n,
+        "cadence_s": o.cadence_s,
+        "attitude": state.attitude.to_dict(),
+        "attitude_frame": "GCRS",
+        "reference_field": o.field,
+        "sensor": sensor.to_dict(),
+        "linear": sensor.linear,
+        **_sensor_change_truth(o.sensor_after, o.sensor_change_utc_s),
+        "effects": effect_truth,
+        "verdict": effect_truth[0]["name"]
+        if len(effect_truth) == 1
+        else ("none" if not effect_truth else "multiple"),
+        "housekeeping": _jsonable(state.housekeeping.__dict__),
+        "eclipse_fraction": float(np.mean(state.illumination < 0.5)) if n else 0.0,
+        "b_ref_rms_nt": norm_rms_nt(state.b_ref_body_nt),
+        "seed": o.seed,
+    }
 
 
 def simulate_measured_field(
@@ -500,13 +518,7 @@ def simulate_measured_field(
         ``injected_body_nt["measured_minus_reference"]`` holds measured − reference in body axes;
         ``tle`` is None.
     """
-    t = np.asarray(t_utc_s, dtype=np.float64)
-    r_itrs = np.asarray(r_itrs_km, dtype=np.float64)
-    b_nec = np.asarray(b_nec_nt, dtype=np.float64)
-    if t.ndim != 1 or t.size < 2 or r_itrs.shape != (t.size, 3) or b_nec.shape != (t.size, 3):
-        raise BadInputError("need t (N,), r_itrs_km (N, 3) and b_nec_nt (N, 3) with N ≥ 2")
-    if np.any(np.diff(t) <= 0):
-        raise BadInputError("times must be strictly ascending")
+    t, r_itrs, b_nec = _checked_track(t_utc_s, r_itrs_km, b_nec_nt)
     profile: AttitudeProfile = attitude if attitude is not None else NadirLVLH()
     housekeeping = housekeeping or Housekeeping()
     sensor_rng, hk_rng, noise_rng = rng.spawn(3)
@@ -529,15 +541,47 @@ def simulate_measured_field(
         mtq_am2=state.mtq_am2,
         hk=dict(state.hk),
     )
-    truth: dict[str, Any] = {
+    return World(
+        telemetry=telemetry,
+        tle=None,
+        sensor=sensor,
+        effects=[],
+        b_ref_body_nt=state.b_ref_body_nt,
+        injected_body_nt={"measured_minus_reference": gap},
+        truth=_measured_truth(state, sensor, gap, source=source, seed=seed),
+    )
+
+
+def _checked_track(
+    t_utc_s: npt.ArrayLike, r_itrs_km: npt.ArrayLike, b_nec_nt: npt.ArrayLike
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Times, positions and measured field as float arrays; BadInputError for shapes that do
+    not match or times not strictly ascending."""
+    t = np.asarray(t_utc_s, dtype=np.float64)
+    r_itrs = np.asarray(r_itrs_km, dtype=np.float64)
+    b_nec = np.asarray(b_nec_nt, dtype=np.float64)
+    if t.ndim != 1 or t.size < 2 or r_itrs.shape != (t.size, 3) or b_nec.shape != (t.size, 3):
+        raise BadInputError("need t (N,), r_itrs_km (N, 3) and b_nec_nt (N, 3) with N ≥ 2")
+    if np.any(np.diff(t) <= 0):
+        raise BadInputError("times must be strictly ascending")
+    return t, r_itrs, b_nec
+
+
+def _measured_truth(
+    state: WorldState, sensor: SensorModel, gap: FloatArray, *, source: str, seed: int | None
+) -> dict[str, Any]:
+    """The ground truth of a measured field put through a synthetic attitude and sensor: the
+    gap measured - reference is its one effect."""
+    t = state.kin.t_utc_s
+    return {
         "spacecraft": source or "measured",
         "source": source,
         "start": utc_s_to_iso([t[0]])[0],
         "end": utc_s_to_iso([t[-1]])[0],
         "n": int(t.size),
-        "attitude": profile.to_dict(),
+        "attitude": state.attitude.to_dict(),
         "attitude_frame": "GCRS",
-        "reference_field": field,
+        "reference_field": state.field,
         "sensor": sensor.to_dict(),
         "linear": sensor.linear,
         "effects": [
@@ -550,17 +594,8 @@ def simulate_measured_field(
             }
         ],
         "verdict": "measured",
-        "housekeeping": _jsonable(housekeeping.__dict__),
+        "housekeeping": _jsonable(state.housekeeping.__dict__),
         "eclipse_fraction": float(np.mean(state.illumination < 0.5)),
         "b_ref_rms_nt": norm_rms_nt(state.b_ref_body_nt),
         "seed": seed,
     }
-    return World(
-        telemetry=telemetry,
-        tle=None,
-        sensor=sensor,
-        effects=[],
-        b_ref_body_nt=state.b_ref_body_nt,
-        injected_body_nt={"measured_minus_reference": gap},
-        truth=truth,
-    )

@@ -105,13 +105,7 @@ async def ingest_telemetry(
     An upload with no valid row is a 422 listing every rejected row; a body beyond a parsing
     limit (rows, columns, nesting, text length, decompressed bytes) is a 413 naming the limit.
     """
-    media = request.headers.get("content-type", "").split(";")[0].strip().lower()
-    fmt = MEDIA_TYPES.get(media)
-    if fmt is None:
-        raise HTTPException(
-            status_code=415,
-            detail=f"Content-Type {media or '(none)'!r} is not one of {', '.join(MEDIA_TYPES)}",
-        )
+    fmt = _upload_format(request)
     body = await _read_body(request, settings.max_body_bytes)
     started = time.perf_counter()
 
@@ -129,22 +123,7 @@ async def ingest_telemetry(
         bad = cast(list[tuple[int, str]], parsed.rejected)  # RowError is a (row, reason) tuple
         if len(parsed.telemetry) == 0:
             # Nothing valid to store: say so with the reasons instead of a 200 "accepted 0".
-            if parsed.rejected:
-                first = parsed.rejected[0]
-                detail = (
-                    f"every row was rejected ({n_rejected} rows); nothing was stored. "
-                    f"First: row {first.row}: {first.reason}"
-                )
-            else:
-                detail = "the upload holds no data rows; nothing was stored"
-            head = {
-                "detail": detail,
-                "errors": [
-                    {"field": f"row {e.row}", "reason": e.reason} for e in parsed.rejected[:100]
-                ],
-                "accepted": 0,
-                "duplicates": 0,
-            }
+            head = _nothing_stored(parsed.rejected)
             with write_tx(engine) as conn:  # the dashboard's rejected-rows plot
                 sc = get_spacecraft(conn, spacecraft_id)
                 log_upload(conn, sc.pk, fmt=fmt, accepted=0, duplicates=0, rejected=bad)
@@ -168,6 +147,37 @@ async def ingest_telemetry(
     if status == 200:
         metrics.ingest_seconds.labels(fmt).observe(time.perf_counter() - started)
     return Response(payload, status_code=status, media_type="application/json")
+
+
+def _upload_format(request: Request) -> str:
+    """The table format of the upload's Content-Type; 415 for a type no reader takes."""
+    media = request.headers.get("content-type", "").split(";")[0].strip().lower()
+    fmt = MEDIA_TYPES.get(media)
+    if fmt is None:
+        raise HTTPException(
+            status_code=415,
+            detail=f"Content-Type {media or '(none)'!r} is not one of {', '.join(MEDIA_TYPES)}",
+        )
+    return fmt
+
+
+def _nothing_stored(rejected: list[RowError]) -> dict[str, Any]:
+    """The 422 answer's head for an upload without a valid row: why, and the first 100 rows'
+    reasons."""
+    if rejected:
+        first = rejected[0]
+        detail = (
+            f"every row was rejected ({len(rejected)} rows); nothing was stored. "
+            f"First: row {first.row}: {first.reason}"
+        )
+    else:
+        detail = "the upload holds no data rows; nothing was stored"
+    return {
+        "detail": detail,
+        "errors": [{"field": f"row {e.row}", "reason": e.reason} for e in rejected[:100]],
+        "accepted": 0,
+        "duplicates": 0,
+    }
 
 
 def _result_json(head: dict[str, Any], rejected: list[RowError]) -> bytes:

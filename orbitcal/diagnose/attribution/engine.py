@@ -283,6 +283,57 @@ def _selection(
     return sel, stepwise, chosen, indistinguishable
 
 
+def _named_regionally(
+    data: DiagnosisData,
+    candidates: Sequence[Effect],
+    split: _Split,
+    residual_nt: FloatArray,
+    selected: list[str],
+    effects: list[EffectScore],
+    n_steps: int,
+) -> tuple[list[EffectScore], list[Effect]]:
+    """The effects with a regional test that find themselves in what the selected model leaves
+    (``residual_nt``): appended to ``selected``, their scores placed after the ``n_steps``
+    step scores in the ranked ``effects``; the new ranking and the effects so named."""
+    named: list[Effect] = []
+    for eff in candidates:
+        if eff.regional_test is None:
+            continue
+        regional = eff.regional_test.run(data, residual_nt, selected)
+        if regional is not None and split.regional is eff:
+            regional.params["others_judged_on"] = eff.regional_test.quiet_note
+        if regional is not None and regional.significant:
+            effects = [e for e in effects if e.name != regional.name]
+            effects.insert(n_steps, regional)
+            selected.append(regional.name)
+            named.append(eff)
+    return effects, named
+
+
+def _report_models(
+    data: DiagnosisData,
+    split: _Split,
+    final: _Model,
+    chosen_blocks: Sequence[DesignBlock],
+    named_regionally: Sequence[Effect],
+    options: AttributionOptions,
+) -> tuple[_Model, _Model]:
+    """The report's baseline and final model. When the others were judged on an effect's quiet
+    samples only, both on every sample: the calibration fitted on all training samples, and the
+    selected effects with the regional effects' models fitted jointly."""
+    if split.report_base is None:
+        return split.base, final
+    final_blocks = list(chosen_blocks)
+    for eff in named_regionally:
+        block = eff.design(data, split.report_train)
+        if block is not None and block.all_finite():
+            final_blocks.append(block)
+    fit = fit_joint(data, split.report_train, final_blocks, robust=options.robust)
+    r = data.b_raw_nt - fit.predict_nt(data)
+    # the report's baseline: its RMS on every held-out sample
+    return split.report_base, _Model(fit, r, norm_rms_nt(r[split.report_holdout]))
+
+
 def attribute(
     data: DiagnosisData,
     *,
@@ -350,34 +401,15 @@ def attribute(
             effects = [absorbed] + [e for e in effects if e.name != absorbed.name]
             confidence = None  # judged by a split fit, not by the held-out chunks
     # What the selected effects leave (e.g. a storm's auroral part once the ring current is in).
-    named_regionally: list[Effect] = []
-    for eff in candidates:
-        if eff.regional_test is None:
-            continue
-        regional = eff.regional_test.run(data, final.residual_nt, selected)
-        if regional is not None and split.regional is eff:
-            regional.params["others_judged_on"] = eff.regional_test.quiet_note
-        if regional is not None and regional.significant:
-            effects = [e for e in effects if e.name != regional.name]
-            effects.insert(len(step_scores), regional)
-            if not selected:
-                confidence = None
-            selected.append(regional.name)
-            named_regionally.append(eff)
-    report_base, report_final = base, final
-    if split.report_base is not None:
-        # The report's baseline and final model on every sample: the calibration fitted on all
-        # training samples, and the selected effects with the regional effect's model fitted
-        # jointly.
-        report_base = split.report_base  # its RMS on every held-out sample
-        final_blocks = list(chosen_blocks)
-        for eff in named_regionally:
-            block = eff.design(data, split.report_train)
-            if block is not None and block.all_finite():
-                final_blocks.append(block)
-        fit = fit_joint(data, split.report_train, final_blocks, robust=options.robust)
-        r = data.b_raw_nt - fit.predict_nt(data)
-        report_final = _Model(fit, r, norm_rms_nt(r[split.report_holdout]))
+    nothing_selected = not selected
+    effects, named_regionally = _named_regionally(
+        data, candidates, split, final.residual_nt, selected, effects, len(step_scores)
+    )
+    if named_regionally and nothing_selected:
+        confidence = None  # the verdict is a regional test's, not the held-out chunks'
+    report_base, report_final = _report_models(
+        data, split, final, chosen_blocks, named_regionally, options
+    )
     splits = split_fit_tests(data, robust=options.robust) if options.split_tests else []
     return Attribution(
         baseline_rms_nt=report_base.rms_nt,

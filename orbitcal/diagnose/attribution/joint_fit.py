@@ -15,11 +15,12 @@ import numpy.typing as npt
 
 from orbitcal.arrays import BoolArray, FloatArray, IntArray
 from orbitcal.diagnose.blocked import BlockedDesign
-from orbitcal.diagnose.bounds import consistency_reasons, param_range
 from orbitcal.diagnose.effects import (
     FIELD_SCALE_NT,
     DesignBlock,
     DiagnosisData,
+    block_inconsistencies,
+    block_ranges,
 )
 from orbitcal.diagnose.options import HOLDOUT_BLOCKS, N_BLOCKS
 from orbitcal.diagnose.prior import CalibrationPrior
@@ -83,8 +84,8 @@ class JointFit:
     def at_bounds(self, k: int, *, rel_tol: float = 1e-4) -> list[str]:
         """Names of block ``k``'s parameters that sit on the edge of their physical range."""
         out = []
-        for name, v in zip(self.blocks[k].names, self.coef[k], strict=True):
-            rng = param_range(name)
+        block = self.blocks[k]
+        for name, v, rng in zip(block.names, self.coef[k], block_ranges(block), strict=True):
             for edge in (rng.lower, rng.upper):
                 if np.isfinite(edge) and abs(float(v) - edge) <= rel_tol * max(abs(edge), 1.0):
                     out.append(name)
@@ -141,9 +142,9 @@ def fit_joint(
         Apply ``data.calibration_prior`` (if any) to the 12 calibration parameters; split fits,
         which ask what the free parameters absorb, turn it off.
     bounded : bool
-        Keep every effect parameter inside its physical range
-        (:func:`orbitcal.diagnose.bounds.param_range`): box-constrained least squares on the
-        normal equations of each reweighting step. False fits them freely (to tell whether a
+        Keep every effect parameter inside the physical range its effect gives it
+        (:meth:`orbitcal.diagnose.effects.Effect.param_range`): box-constrained least squares on
+        the normal equations of each reweighting step. False fits them freely (to tell whether a
         candidate only wins by leaving its range).
     weights : ndarray, shape (N, 3), optional
         Starting weight of each sample's three rows (default 1): with ``robust`` False, a
@@ -157,78 +158,137 @@ def fit_joint(
         are then within ~1e-4 standard errors of the converged ones.
     """
     design = BlockedDesign(data, blocks)
-    scale = design.scale
-    p = design.p
     index = np.flatnonzero(fit_mask)
-    n_rows = 3 * index.size
     y = data.b_raw_nt[index].reshape(-1)
     w = np.ones_like(y) if weights is None else np.asarray(weights[index], dtype=float).reshape(-1)
-    theta = np.zeros(p)
-    sigma = 1.0
-    normal = np.eye(p)
+    noise = _PlainNoise(design, index, y)
+    prior = data.calibration_prior if use_prior else None
+    prior_mean, prior_precision = _prior_terms(design, blocks, prior, noise, bounded=bounded)
+    lo_s, hi_s = _scaled_bounds(blocks, design.scale) if bounded else (None, None)
+    steps = _Reweighting(robust, iterations, huber_steps, tol_sd)
     # A light ridge on the effect columns (unit-scaled, 1e-5 of their mean square) keeps nearly
     # collinear regressors (e.g. a current bump sampled at only two local times) from exploding;
     # the 12 calibration columns are left free.
+    p = design.p
     ridge = np.diag(np.r_[np.full(12, 1e-10), np.full(p - 12, ridge_effects)])
-    prior = data.calibration_prior if use_prior else None
+    theta, normal, sigma, r = _reweighted_solve(
+        design, index, y, w, ridge, (prior_mean, prior_precision), (lo_s, hi_s), steps
+    )
+    return _packed(blocks, design.scale, theta, normal, sigma, r, bounded=bounded)
+
+
+class _PlainNoise:
+    """The noise of the model fitted by plain least squares (computed once, when first asked):
+    the fixed scale of the priors, so that a prior at odds with the data cannot inflate its own
+    weight through the residual."""
+
+    def __init__(self, design: BlockedDesign, index: IntArray, y: FloatArray) -> None:
+        self.design, self.index, self.y = design, index, y
+        self._sigma: float | None = None
+
+    def sigma(self) -> float:
+        if self._sigma is None:
+            theta0 = _plain_least_squares(self.design, self.index, self.y)
+            self._sigma = _robust_sigma(self.design.residual(self.index, self.y, theta0))
+        return self._sigma
+
+
+def _prior_terms(
+    design: BlockedDesign,
+    blocks: Sequence[DesignBlock],
+    prior: CalibrationPrior | None,
+    noise: _PlainNoise,
+    *,
+    bounded: bool,
+) -> tuple[FloatArray, FloatArray]:
+    """Prior means and precisions of all unit-scaled parameters (precision 0: no prior): the
+    calibration prior on the 12, the effects' Gaussian priors when ``bounded``, each weighted by
+    the noise variance."""
+    p = design.p
+    scale = design.scale
     prior_precision = np.zeros(p)
     prior_mean = np.zeros(p)
-    plain_noise: float | None = None  # the noise of the same model by plain least squares
-
-    def noise_of_plain_fit() -> float:
-        nonlocal plain_noise
-        if plain_noise is None:
-            theta0 = _plain_least_squares(design, index, y)
-            plain_noise = _robust_sigma(design.residual(index, y, theta0))
-        return plain_noise
-
     if prior is not None:
         prior_mean[:12], prior_precision[:12] = _calibration_prior_terms(prior, scale)
         # The data term is unweighted by the noise, so the prior is scaled by the noise variance:
         # that of the same model fitted without the prior when the rows allow it (else of the
-        # prior calibration itself), fixed, so that a prior at odds with the data cannot inflate
-        # its own weight through the residual.
-        if n_rows > 2 * p + 30:
-            noise = noise_of_plain_fit()
+        # prior calibration itself), fixed.
+        if 3 * noise.index.size > 2 * p + 30:
+            sigma = noise.sigma()
         else:
             theta_prior = np.r_[prior_mean[:12], np.zeros(p - 12)]
-            noise = _robust_sigma(design.residual(index, y, theta_prior))
-        prior_precision *= noise**2
-    lo_s, hi_s = _scaled_bounds(blocks, scale) if bounded else (None, None)
+            sigma = _robust_sigma(design.residual(noise.index, noise.y, theta_prior))
+        prior_precision *= sigma**2
     if bounded:
-        # Gaussian priors of parameters with a published value (bounds.ParamRange.prior_*),
+        # Gaussian priors of parameters with a published value (ParamRange.prior_*),
         # weighted by the noise of a fit without them (fixed, as for the calibration prior).
         pm, pp = _effect_priors(blocks, scale)
         if np.any(pp > 0.0):
-            noise = noise_of_plain_fit()
+            sigma = noise.sigma()
             prior_mean = np.where(pp > 0.0, pm, prior_mean)
-            prior_precision = prior_precision + pp * noise**2
+            prior_precision = prior_precision + pp * sigma**2
+    return prior_mean, prior_precision
+
+
+@dataclass(frozen=True)
+class _Reweighting:
+    """How :func:`fit_joint` reweights (its parameters of the same names)."""
+
+    robust: bool
+    iterations: int
+    huber_steps: int
+    tol_sd: float
+
+
+def _reweighted_solve(
+    design: BlockedDesign,
+    index: IntArray,
+    y: FloatArray,
+    w: FloatArray,
+    ridge: FloatArray,
+    prior: tuple[FloatArray, FloatArray],
+    box: tuple[FloatArray | None, FloatArray | None],
+    steps: _Reweighting,
+) -> tuple[FloatArray, FloatArray, float, FloatArray]:
+    """The iteratively reweighted solution from the starting weights ``w``: the scaled
+    parameters, the normal matrix, the robust sigma and the residual of the last step.
+
+    ``ridge`` (p, p) is relative to the number of rows; ``prior`` the means and precisions of
+    :func:`_prior_terms`; ``box`` the scaled bounds (None: unbounded)."""
+    prior_mean, prior_precision = prior
+    p = design.p
+    n_rows = 3 * index.size
+    lo_s, hi_s = box
+    theta = np.zeros(p)
+    sigma = 1.0
+    normal = np.eye(p)
     theta_prev: FloatArray | None = None
     r = y  # the residual of theta = 0, were there no iteration
-    for it in range(iterations if robust else 1):
+    iterations = steps.iterations
+    for it in range(iterations if steps.robust else 1):
         # Normal equations accumulated a block of samples at a time (memory bounded by the
         # block, not by the number of samples).
         gram, rhs_data = design.normal_equations(index, y, w)
         normal = gram + ridge * n_rows + np.diag(prior_precision)
         rhs = rhs_data + prior_precision * prior_mean
         try:
-            theta = np.linalg.solve(normal, rhs)
+            theta = np.asarray(np.linalg.solve(normal, rhs), dtype=np.float64)
         except np.linalg.LinAlgError:  # pragma: no cover - singular design
             theta = design.lstsq(index, y, w)
         if lo_s is not None and hi_s is not None and (np.any(theta < lo_s) or np.any(theta > hi_s)):
             theta = _box_solve(normal, rhs, lo_s, hi_s, theta)
         r = design.residual(index, y, theta)
         sigma = _robust_sigma(r)
-        if not robust or it == iterations - 1:
+        if not steps.robust or it == iterations - 1:
             break
-        last_phase = huber_steps >= iterations - 1 or it >= huber_steps + 2
+        last_phase = steps.huber_steps >= iterations - 1 or it >= steps.huber_steps + 2
         if last_phase and theta_prev is not None:
             sd = sigma * np.sqrt(np.abs(np.diag(np.linalg.pinv(normal))))
-            if np.all(np.abs(theta - theta_prev) <= tol_sd * np.maximum(sd, 1e-300)):
+            if np.all(np.abs(theta - theta_prev) <= steps.tol_sd * np.maximum(sd, 1e-300)):
                 break
         theta_prev = theta
-        w = _robust_weights(r, sigma, huber=it < huber_steps)
-    return _packed(blocks, scale, theta, normal, sigma, r, bounded=bounded)
+        w = _robust_weights(r, sigma, huber=it < steps.huber_steps)
+    return theta, normal, sigma, r
 
 
 def _packed(
@@ -318,7 +378,7 @@ def _scaled_bounds(
     lo = [np.full(12, -np.inf)]
     hi = [np.full(12, np.inf)]
     for bl in blocks:
-        ranges = [param_range(n) for n in bl.names]
+        ranges = block_ranges(bl)
         lo.append(np.array([r.lower for r in ranges]))
         hi.append(np.array([r.upper for r in ranges]))
     lo_all, hi_all = np.concatenate(lo), np.concatenate(hi)
@@ -335,8 +395,7 @@ def _effect_priors(
     prec = np.zeros(scale.size)
     col = 12
     for bl in blocks:
-        for n in bl.names:
-            rng = param_range(n)
+        for rng in block_ranges(bl):
             if rng.prior_mean is not None and rng.prior_sd:
                 mean[col] = rng.prior_mean * scale[col]
                 prec[col] = 1.0 / (rng.prior_sd * scale[col]) ** 2
@@ -370,7 +429,8 @@ def _train_bic(
 ) -> float:
     """Bayesian information criterion of a plain least-squares fit on the training samples.
 
-    Infinite when the last block's parameters contradict each other (``consistency_reasons``).
+    Infinite when the last block's parameters contradict each other (its effect's
+    ``consistency``).
     """
     return _train_bic_at_bounds(data, train, blocks, bounded=bounded)[0]
 
@@ -465,7 +525,7 @@ def _sd(fit: JointFit, k: int) -> FloatArray:
 
 def _inconsistent(fit: JointFit, k: int) -> bool:
     return bool(
-        consistency_reasons(
-            fit.blocks[k].names, [float(v) for v in fit.coef[k]], [float(v) for v in _sd(fit, k)]
+        block_inconsistencies(
+            fit.blocks[k], [float(v) for v in fit.coef[k]], [float(v) for v in _sd(fit, k)]
         )
     )

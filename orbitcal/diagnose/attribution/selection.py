@@ -16,11 +16,11 @@ from orbitcal.arrays import BoolArray, FloatArray, IntArray
 from orbitcal.diagnose.attribution.joint_fit import JointFit, _bic, _resolve, _sd, fit_joint
 from orbitcal.diagnose.attribution.significance import _chunk_test, _support
 from orbitcal.diagnose.attribution.uncertainty import _autocorr_inflation
-from orbitcal.diagnose.bounds import param_range
 from orbitcal.diagnose.effects import (
     DesignBlock,
     DiagnosisData,
     Effect,
+    block_ranges,
     get_effect,
 )
 from orbitcal.metrics import norm_rms_nt
@@ -213,7 +213,7 @@ class Selection:
         if key in self._beside:  # the same effects again (forward, swap and pair steps)
             return self._beside[key][1]
         effect = self.effects[name]
-        if effect.design_beside is not None:
+        if effect.build_beside is not None:
             again = effect.design_beside(self.data, self.train, fixed)
         else:
             if fixed_fit is None:
@@ -256,11 +256,15 @@ class Selection:
         # the calibration absorbs whole) may take any value and proves nothing; a value
         # compatible with zero (a crust amplitude of 0 +- 0.1) means the effect is absent.
         outside = [
-            f"{n} = {float(v):.4g} +- {float(e):.2g} outside {param_range(n).describe()}"
-            for n, v, e in zip(
-                bl.names, free.coef[-1], _sd(free, len(free.blocks) - 1), strict=True
+            f"{n} = {float(v):.4g} +- {float(e):.2g} outside {rng.describe()}"
+            for n, v, e, rng in zip(
+                bl.names,
+                free.coef[-1],
+                _sd(free, len(free.blocks) - 1),
+                block_ranges(bl),
+                strict=True,
             )
-            if not (param_range(n).lower - 3.0 * e <= float(v) <= param_range(n).upper + 3.0 * e)
+            if not (rng.lower - 3.0 * e <= float(v) <= rng.upper + 3.0 * e)
             and abs(float(v)) > 3.0 * e  # compatible with zero: absent, not implausible
         ]
         if not outside:
@@ -335,7 +339,7 @@ class Selection:
                 _, r_full, rms_full = self.fit([x.block for x in chosen])
                 full = (r_full, rms_full)
             base = self.designs[partner]
-            simple = DesignBlock(base.source, base.names, base.variant)
+            simple = DesignBlock(base.source, base.names, base.variant, effect=base.effect)
             others = [x.block for x in chosen if x is not c]
             rep, r, rms = self.fit([*others, simple])
             hold = self.holdout

@@ -11,10 +11,11 @@ import numpy as np
 
 from orbitcal.arrays import BoolArray, FloatArray
 from orbitcal.diagnose.attribution.joint_fit import JointFit, _sd
-from orbitcal.diagnose.bounds import param_range
+from orbitcal.diagnose.calibration_columns import calibration_r_inv_of
 from orbitcal.diagnose.effects import (
     FIELD_SCALE_NT,
     DiagnosisData,
+    block_ranges,
 )
 
 #: Two-sided 90 % quantile of the standard normal distribution.
@@ -37,8 +38,8 @@ def _intervals(
     infl = max(_autocorr_inflation(r[:, i]) for i in range(3))
     sd = _sd(fit, k) * np.sqrt(infl)
     out: dict[str, list[float]] = {}
-    for n, v, e in zip(fit.blocks[k].names, fit.coef[k], sd, strict=True):
-        rng = param_range(n)
+    block = fit.blocks[k]
+    for n, v, e, rng in zip(block.names, fit.coef[k], sd, block_ranges(block), strict=True):
         out[n] = [max(float(v - Z90 * e), rng.lower), min(float(v + Z90 * e), rng.upper)]
     return out
 
@@ -126,7 +127,7 @@ def _calibration_basis(data: DiagnosisData, train: BoolArray) -> _CalibrationBas
     """The calibration's orthonormal basis on the training rows, in factored form."""
     idx = np.flatnonzero(train)
     return _CalibrationBasis(
-        data.b_ref_body_nt[idx] / FIELD_SCALE_NT, data.calibration_r_inv_of(idx)
+        data.b_ref_body_nt[idx] / FIELD_SCALE_NT, calibration_r_inv_of(data, idx)
     )
 
 
