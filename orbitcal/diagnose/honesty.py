@@ -11,6 +11,16 @@ against the same held-out data, and says so where a claim does not hold:
   shrink the held-out residual significantly beside these (:func:`residue_test`). Real effects
   never have exactly the catalogue's shape; what the template of a real effect misses is
   otherwise handed to the next flexible candidate and called significant.
+* **Inseparable.** An effect at least :data:`INSEPARABLE_LIMIT` of whose fitted field is a change
+  of the 12 calibration parameters on this span, and whose remaining part is smaller than what
+  the final model leaves unexplained on the held-out blocks, cannot be told from the calibration:
+  its held-out gain says how it moves the calibration's extrapolation, not that it is present
+  (:func:`inseparable_selected`). It is withdrawn (``status: "inseparable"``); an effect that was
+  significant only beside a withdrawn one is withdrawn too (:func:`_still_significant`); a
+  selection that an inseparable candidate beats :data:`OVERSHADOW_RATIO` times on the held-out
+  blocks is ``overshadowed``. The verdict's status then says that the gap cannot be separated
+  from the calibration on this span, names the candidates, and what would decide -- under nadir
+  pointing on the real Swarm storm pass every candidate but the crust is so.
 * **Never worse than the baseline.** If the final model's held-out RMS exceeds the calibration's
   alone, the last effects are withdrawn until it does not (falling back to the calibration
   alone), and the report says so (``honesty.fell_back``).
