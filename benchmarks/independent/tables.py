@@ -30,13 +30,22 @@ def _real(before: dict, after: dict) -> list[str]:
         "|---|---:|---:|",
     ]
 
-    def stat(rows: list[dict], att: str | None) -> str:
+    def stat(rows: list[dict], att: str | None, key: str = "ok") -> str:
         sel = [r for r in rows if att is None or r["attitude"] == att]
-        return f"{sum(bool(r['ok']) for r in sel)} of {len(sel)}"
+        return f"{sum(bool(r.get(key)) for r in sel)} of {len(sel)}"
 
     for att in (None, "tumbling", "nadir"):
-        label = "passing draws" + (f", {att}" if att else "")
+        label = "verdict external_field, nothing else significant" + (f", {att}" if att else "")
         out.append(f"| {label} | {stat(rows_b, att)} | {stat(rows_a, att)} |")
+    for att in (None, "tumbling", "nadir"):
+        label = (
+            "... or an explicit 'cannot be separated from the calibration on this span' naming"
+            " it (issue 25's criterion)" + (f", {att}" if att else "")
+        )
+        out.append(
+            f"| {label} | {stat(rows_b, att, 'ok_or_explicit')} |"
+            f" {stat(rows_a, att, 'ok_or_explicit')} |"
+        )
     gapless = [
         sum(r["verdict"] == "none" and not r.get("none_with_gap") for r in x)
         for x in (rows_b, rows_a)

@@ -45,6 +45,7 @@ import numpy as np
 from orbitcal.arrays import BoolArray, FloatArray
 from orbitcal.diagnose.effects import effect_param_range
 from orbitcal.diagnose.signed_rank import signed_rank_greater_p
+from orbitcal.diagnose.span_options import ORBIT_S
 from orbitcal.metrics import norm_rms_nt
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -516,7 +517,7 @@ def _overshadowed(att: Attribution, keep: Sequence[str], final: _Final) -> list[
     explains the held-out residual :data:`OVERSHADOW_RATIO` times better than their model: their
     gain may be a fragment of the same misfit, so none of them can be named on this span."""
     regress = [n for n in keep if n not in OWN_TEST]
-    if not regress:
+    if not regress or att.span_s >= ORBIT_S:
         return []
     by_name = {e.name: e for e in att.effects}
     best = [by_name[n].holdout_rms_after_nt for n in inseparable_candidates(att)]
@@ -536,8 +537,15 @@ def inseparable_selected(
     blocks above the noise floor: a remainder that small is what any unmodelled structure can
     mimic. On a clean world the remainder of a real effect stands above a residual at the noise
     floor and the effect stays named.
+
+    Only on a span shorter than an orbit (:data:`~orbitcal.diagnose.span_options.ORBIT_S`):
+    there the held-out blocks cover latitudes the training blocks never saw, and the held-out
+    gain of an effect the calibration absorbs measures how it changes the calibration's
+    extrapolation. Over whole orbits the held-out blocks repeat the training geometry and the
+    remainder's gain is the effect's own (on the compound benchmark's four-orbit worlds the rule
+    withdrew real effects beside auroral currents: recall 99.2 -> 94.3 % on plan seed 251).
     """
-    if att.has_prior:
+    if att.has_prior or att.span_s >= ORBIT_S:
         return []
     by_name = {e.name: e for e in att.effects}
     fit = att.fits.get("final")
