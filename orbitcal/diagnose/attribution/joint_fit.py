@@ -432,20 +432,12 @@ def _train_bic(
     Infinite when the last block's parameters contradict each other (its effect's
     ``consistency``).
     """
-    return _train_bic_at_bounds(data, train, blocks, bounded=bounded)[0]
-
-
-def _train_bic_at_bounds(
-    data: DiagnosisData, train: BoolArray, blocks: Sequence[DesignBlock], *, bounded: bool = True
-) -> tuple[float, bool]:
-    """:func:`_train_bic` and whether the last block's fit rests on an edge of its range."""
     fit = fit_joint(data, train, blocks, robust=False, bounded=bounded)
     if blocks and _inconsistent(fit, len(blocks) - 1):
-        return float("inf"), False
+        return float("inf")
     n = 3 * int(train.sum())
     k = 12 + sum(len(b.names) for b in blocks)
-    at_bounds = bool(blocks) and bounded and bool(fit.at_bounds(len(blocks) - 1))
-    return float(n * np.log(max(fit.train_rss_nt2, 1e-300) / n) + k * np.log(n)), at_bounds
+    return float(n * np.log(max(fit.train_rss_nt2, 1e-300) / n) + k * np.log(n))
 
 
 def _bic(fit: JointFit, residual_nt: FloatArray, train: BoolArray, inflation: float = 1.0) -> float:
@@ -474,29 +466,19 @@ def _resolve(
     """Pick among a block's alternatives by the training BIC (never the held-out data).
 
     A variant whose parameters contradict each other (e.g. a second-order time-shift term that
-    is not the square of the shift) is not chosen, and one whose fit rests on an edge of its
-    physical range is chosen only when every variant's does (issue 25: on the real storm pass a
-    ring-current model scaled 7x beside a uniform field nearly collinear with it, or a recovery
-    whose asymptote is a positive field, won the training BIC at the edge of its range while a
-    physical form of the same effect was at hand).
+    is not the square of the shift) is not chosen.
     """
     if not block.alternatives:
         return block
     # One alternative at a time: a lazily built one is dropped unless it is the best so far.
     # The first lowest BIC wins (a NaN counts as lowest, as in numpy's argmin).
-    bic0, edge0 = _train_bic_at_bounds(data, train, [*fixed, block], bounded=bounded)
-    best, best_bic = block, bic0
-    inside = (block, bic0) if not edge0 and np.isfinite(bic0) else None
+    best, best_bic = block, _train_bic(data, train, [*fixed, block], bounded=bounded)
     any_finite = bool(np.isfinite(best_bic))
     for opt in block.alternatives:
-        bic, edge = _train_bic_at_bounds(data, train, [*fixed, opt], bounded=bounded)
+        bic = _train_bic(data, train, [*fixed, opt], bounded=bounded)
         any_finite = any_finite or bool(np.isfinite(bic))
         if bic < best_bic or (np.isnan(bic) and not np.isnan(best_bic)):
             best, best_bic = opt, bic
-        if not edge and np.isfinite(bic) and (inside is None or bic < inside[1]):
-            inside = (opt, bic)
-    if inside is not None:
-        best, best_bic = inside
     # The chosen form refined (a step time between two of the grid's): its nearby forms, the
     # best kept, until none refines further. A nearby form of the same variant is the chosen one
     # with a finer refinement (no refit).
