@@ -2,6 +2,7 @@
 
     python benchmarks/independent/tables.py --real BEFORE.json AFTER.json \
         --worlds LABEL=FILE ... > benchmarks/results/diagnose_independent.md
+    python benchmarks/independent/tables.py --real-summary RUN.json ...   # the README's row
 """
 
 from __future__ import annotations
@@ -115,12 +116,30 @@ def _worlds(runs: list[tuple[str, dict]]) -> list[str]:
     return out
 
 
+def _real_summary(paths: list[Path]) -> list[str]:
+    """Issue 25's criterion summed over several real_pass.py runs (the README's row)."""
+    rows = [r for p in paths for r in json.loads(p.read_text())["rows"]]
+
+    def count(att: str | None) -> str:
+        sel = [r for r in rows if att is None or r["attitude"] == att]
+        return f"{sum(bool(r.get('ok_or_explicit')) for r in sel)} of {len(sel)}"
+
+    return [
+        f"external field or the explicit statement, nothing else significant: {count(None)} "
+        f"(nadir {count('nadir')}, tumbling {count('tumbling')}); runs: "
+        + ", ".join(p.name for p in paths)
+    ]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
+    ap.add_argument("--real-summary", nargs="+", type=Path, default=[])
     ap.add_argument("--real", nargs=2, type=Path)
     ap.add_argument("--worlds", nargs="*", default=[])
     args = ap.parse_args()
     lines: list[str] = []
+    if args.real_summary:
+        lines += [*_real_summary(args.real_summary), ""]
     if args.real:
         b, a = (json.loads(p.read_text()) for p in args.real)
         lines += [*_real(b, a), ""]
