@@ -44,6 +44,13 @@ import numpy as np
 
 from orbitcal.arrays import BoolArray, FloatArray
 from orbitcal.diagnose.effects import effect_param_range
+from orbitcal.diagnose.gap import (
+    GAP_TIMES_NOISE,
+    INSEPARABLE_LIMIT,
+    gap_section,
+    noise_floor_nt,
+    verdict_status,
+)
 from orbitcal.diagnose.signed_rank import signed_rank_greater_p
 from orbitcal.diagnose.span_options import ORBIT_S
 from orbitcal.metrics import norm_rms_nt
@@ -63,8 +70,6 @@ __all__ = [
     "reviewed",
 ]
 
-#: A held-out residual more than this many times the noise floor is an unexplained gap [-].
-GAP_TIMES_NOISE = 1.5
 #: The residue test's significance level and least relative gain of the held-out RMS.
 RESIDUE_ALPHA = 0.01
 RESIDUE_MIN_GAIN = 0.03
@@ -77,44 +82,9 @@ RESIDUE_CHUNKS = 16
 FLEXIBLE = frozenset({"attitude_error", "sun_driven", "magnetorquer", "nonlinearity"})
 #: Effects judged by their own tests, not by the held-out blocks (never demoted here).
 OWN_TEST = frozenset({"field_aligned_currents"})
-#: Share of an effect's fitted field (training energy) that a change of the 12 calibration
-#: parameters reproduces, at or above which the span cannot tell the effect from the calibration
-#: at all (issue 25): what is left of its field is <= 10 % in amplitude, and its held-out gain then
-#: measures how it changes the calibration's extrapolation, not its own shape. Under nadir
-#: pointing on the real Swarm storm pass every candidate but the crust reaches 0.985-1.0 (a
-#: uniform external field, a time shift, a drift and a stray field all look like a change of
-#: scale and offset there), so none of them can be named.
-INSEPARABLE_LIMIT = 0.99
 #: A candidate the span cannot tell from the calibration that leaves less than 1 / this of the
 #: selected model's held-out residual overshadows the selection (:func:`_overshadowed`).
 OVERSHADOW_RATIO = 2.0
-#: What data would decide, beyond the closest candidates' own needs.
-GENERAL_DECIDERS = (
-    "a prior calibration (orbitcal diagnose --calibration CAL.json)",
-    "a longer span (more orbits in the training and held-out blocks)",
-    "other attitudes (body rates and orientations that move each axis through the field)",
-)
-
-
-def noise_floor_nt(residual_nt: FloatArray, mask: BoolArray | None = None) -> float:
-    """White-noise level of a residual per component [nT] from its second differences.
-
-    For white noise of standard deviation sigma, ``r[k+1] - 2 r[k] + r[k-1]`` has standard
-    deviation ``sqrt(6) sigma``; slow signals (an orbit-scale mismatch, a drift) cancel in it. The
-    median absolute value (``0.6745 sigma`` for a normal variable) keeps spikes and short auroral
-    structures from raising the estimate. Second differences across a gap are not used.
-    """
-    r = np.asarray(residual_nt, dtype=float)
-    idx = np.flatnonzero(mask) if mask is not None else np.arange(r.shape[0])
-    if idx.size < 8:
-        return float("nan")
-    consecutive = (np.diff(idx[:-1]) == 1) & (np.diff(idx[1:]) == 1)
-    d2 = r[idx[2:]] - 2.0 * r[idx[1:-1]] + r[idx[:-2]]
-    d2 = d2[consecutive]
-    if d2.shape[0] < 5:
-        return float("nan")
-    per_axis = np.median(np.abs(d2), axis=0) / 0.6745 / np.sqrt(6.0)
-    return float(np.sqrt(np.mean(per_axis**2)))
 
 
 @dataclass(frozen=True)
@@ -290,111 +260,6 @@ def _bound_limited(effect: dict[str, Any]) -> dict[str, bool]:
         hi_hit = bool(np.isfinite(rng.upper) and float(iv[1]) >= rng.upper - tol)
         out[name] = lo_hit or hi_hit
     return out
-
-
-def _refusal(e: dict[str, Any]) -> str:
-    if e.get("inseparable"):
-        return str(e.get("inseparable_reason"))
-    if e.get("status") == "implausible":
-        return f"implausible: {e.get('implausible_reason')}"
-    if e.get("status") == "possible residue":
-        return str(e.get("residue_reason"))
-    absorbed = e.get("absorbed_by_calibration_fraction")
-    if absorbed is not None and absorbed >= 0.9:
-        return (
-            f"absorbed by the calibration: {absorbed:.0%} of its fitted field is a change of the "
-            "12 parameters on this span"
-        )
-    return (
-        f"not significant: held-out shrink {e.get('shrink')} (p = {e.get('p_value')}), "
-        "within what chance or the calibration's own error explain"
-    )
-
-
-def _deciders(names: Sequence[str]) -> str:
-    """What data would tell ``names`` from the calibration, each idea once."""
-    from orbitcal.diagnose.report import SEPARATING_DATA
-
-    ideas: list[str] = ["a prior calibration (orbitcal diagnose --calibration CAL.json)"]
-    for n in names:
-        for part in SEPARATING_DATA.get(n, "").replace(" or ", ", ").split(", "):
-            part = part.strip()
-            if part and "prior calibration" not in part and part not in ideas:
-                ideas.append(part)
-    return "; ".join(ideas)
-
-
-def _gap(
-    report: dict[str, Any],
-    data: DiagnosisData,
-    final: _Final,
-    holdout: BoolArray,
-    inseparable: Sequence[str] = (),
-) -> dict[str, Any]:
-    from orbitcal.diagnose.report import SEPARATING_DATA
-
-    sigma = noise_floor_nt(final.residual_nt, holdout)
-    rms = final.rms_nt / np.sqrt(3.0)  # per component, as sigma
-    times = float(rms / sigma) if np.isfinite(sigma) and sigma > 0 else float("nan")
-    unexplained = bool(np.isfinite(times) and times > GAP_TIMES_NOISE)
-    excess = float(np.sqrt(max(rms**2 - sigma**2, 0.0))) if np.isfinite(sigma) else float("nan")
-    where = (report.get("final") or {}).get("where") or report.get("where") or {}
-    closest = sorted(
-        (e for e in report["effects"] if not e["significant"]),
-        key=lambda e: (e.get("holdout_rms_after_nt") is None, e.get("holdout_rms_after_nt") or 0.0),
-    )[:3]
-    decide = [
-        *dict.fromkeys(SEPARATING_DATA[e["name"]] for e in closest if e["name"] in SEPARATING_DATA),
-        *GENERAL_DECIDERS,
-    ]
-    gap: dict[str, Any] = {
-        "unexplained": unexplained,
-        "holdout_rms_nt": round(float(rms), 4),
-        "noise_floor_nt": round(float(sigma), 4) if np.isfinite(sigma) else None,
-        "times_noise": round(times, 2) if np.isfinite(times) else None,
-        "excess_rms_nt": round(excess, 4) if np.isfinite(excess) else None,
-        "noise_floor_from": "second differences of the final residual on the held-out samples "
-        "(median absolute value): the white part of the noise",
-        "where": {
-            "concentration": where.get("concentration"),
-            "axis_rms_nt": where.get("axis_rms_nt"),
-        },
-        "closest_candidates": [
-            {
-                "name": e["name"],
-                "holdout_rms_after_nt": e.get("holdout_rms_after_nt"),
-                "shrink": e.get("shrink"),
-                "refused_because": _refusal(e),
-            }
-            for e in closest
-        ],
-        "would_decide": decide,
-        "inseparable": list(inseparable),
-    }
-    if inseparable:
-        gap["inseparable_statement"] = (
-            f"the held-out residual ({rms:.3g} nT per component, {times:.1f} x the noise floor) "
-            "cannot be separated from the calibration on this span: "
-            + ", ".join(inseparable)
-            + f" would each shrink it, but >= {INSEPARABLE_LIMIT:.0%} of each one's fitted field "
-            "is a change of the 12 calibration parameters, so the held-out blocks cannot tell "
-            "which (if any) is present; what would decide: " + _deciders(inseparable)
-        )
-    if unexplained:
-        gap["statement"] = (
-            f"an unexplained gap: the held-out residual is {rms:.3g} nT per component, "
-            f"{times:.1f} x the noise floor ({sigma:.3g} nT); no candidate explains it"
-            + (
-                f"; it lies mostly at {where['concentration']}"
-                if where.get("concentration")
-                else ""
-            )
-        )
-    else:
-        gap["statement"] = (
-            f"the held-out residual is at the noise floor ({times:.2f} x {sigma:.3g} nT)"
-        )
-    return gap
 
 
 @dataclass
@@ -614,10 +479,6 @@ def _verdict(keep: Sequence[str]) -> str:
     return keep[0] if keep else "none"
 
 
-#: As :data:`orbitcal.diagnose.report.FIRM_CONFIDENCE`: below it a verdict is not stable.
-FIRM_CONFIDENCE = 0.8
-
-
 def review_report(
     report: dict[str, Any],
     data: DiagnosisData,
@@ -638,14 +499,37 @@ def review_report(
         report["data"]["holdout"] = (
             f"later time blocks (the last {share:.0%} of the samples) that no fit saw"
         )
-    by_name = {e["name"]: e for e in report["effects"]}
     for e in report["effects"]:
         limited = _bound_limited(e)
         e["param_bound_limited"] = limited
         e["bound_limited"] = any(limited.values())
     rv = rv if rv is not None else review(data, att)
-    keep, final, holdout = rv.keep, rv.final, att.holdout
-    residues, withdrawn, fell_back = rv.residues, rv.withdrawn, rv.fell_back
+    _mark_withdrawn(report, att, rv)
+    changed = rv.keep != list(att.selected)
+    if changed:
+        _final_section(report, data, att, rv)
+    if changed and rv.verdict != report["verdict"]:
+        report["verdict"] = rv.verdict
+        report["verdict_confidence"] = None
+    report["gap"] = gap_section(
+        report,
+        data,
+        rv.final.residual_nt,
+        rv.final.rms_nt,
+        att.holdout,
+        inseparable_candidates(att),
+    )
+    absorbed = absorbed_candidates(att)
+    report["gap"]["absorbed_by_calibration"] = absorbed
+    verdict_status(report, absorbed, OWN_TEST)
+    report["honesty"] = _honesty_section(rv)
+    return report
+
+
+def _mark_withdrawn(report: dict[str, Any], att: Attribution, rv: Review) -> None:
+    """Each effect the review withdrew: not significant, its status and the reason."""
+    by_name = {e["name"]: e for e in report["effects"]}
+    residues = rv.residues
     for r in residues:
         if not r["possible_residue"]:
             continue
@@ -690,100 +574,52 @@ def review_report(
             + ", ".join(rv.inseparable + [r["effect"] for r in residues if r["possible_residue"]])
             + ": without them it no longer shrinks the held-out residual significantly"
         )
-    for name in withdrawn:
+    for name in rv.withdrawn:
         e = by_name[name]
         e["significant"] = False
         e["status"] = "withdrawn"
         e["withdrawn_reason"] = (
             "the final model with it was worse on the held-out blocks than the calibration alone"
         )
-    changed = keep != list(att.selected)
-    if changed:
-        from orbitcal.diagnose.report import _clean
-        from orbitcal.diagnose.where import where_analysis
 
-        report["final"]["effects"] = list(keep)
-        report["final"]["holdout_rms_nt"] = round(final.rms_nt / np.sqrt(3.0), 4)
-        report["final"]["norm_holdout_rms_nt"] = round(final.rms_nt, 4)
-        report["final"]["shrink"] = round(att.baseline_rms_nt / max(final.rms_nt, 1e-12), 4)
-        report["final"]["where"] = (
-            _clean(where_analysis(data, final.residual_nt, holdout=holdout)) if keep else None
-        )
-        ranked = [by_name[n] for n in keep] + [
-            e for e in report["effects"] if e["name"] not in keep
-        ]
-        report["effects"] = ranked
-    if changed and rv.verdict != report["verdict"]:
-        report["verdict"] = rv.verdict
-        report["verdict_confidence"] = None
-    report["gap"] = _gap(report, data, final, holdout, inseparable_candidates(att))
-    absorbed = absorbed_candidates(att)
-    report["gap"]["absorbed_by_calibration"] = absorbed
-    unseen = (
-        "; the calibration takes up "
-        + ", ".join(absorbed)
-        + f" whole on this span (>= {INSEPARABLE_LIMIT:.0%} of each one's fitted field is a "
-        "change of the 12 parameters): if present, they cannot be separated from the "
-        "calibration on this span; what would decide: " + _deciders(absorbed)
-        if absorbed and not report["gap"]["inseparable"]
-        else ""
+
+def _final_section(
+    report: dict[str, Any], data: DiagnosisData, att: Attribution, rv: Review
+) -> None:
+    """The report's ``final`` section and effect order for the effects that stand."""
+    from orbitcal.diagnose.report import _clean
+    from orbitcal.diagnose.where import where_analysis
+
+    keep, final = rv.keep, rv.final
+    by_name = {e["name"]: e for e in report["effects"]}
+    report["final"]["effects"] = list(keep)
+    report["final"]["holdout_rms_nt"] = round(final.rms_nt / np.sqrt(3.0), 4)
+    report["final"]["norm_holdout_rms_nt"] = round(final.rms_nt, 4)
+    report["final"]["shrink"] = round(att.baseline_rms_nt / max(final.rms_nt, 1e-12), 4)
+    report["final"]["where"] = (
+        _clean(where_analysis(data, final.residual_nt, holdout=att.holdout)) if keep else None
     )
-    separation = {s["effect"]: s for s in report.get("separation") or []}
-    verdict = report["verdict"]
-    report["separable"] = None if verdict == "none" else verdict not in separation
-    conf = report.get("verdict_confidence")
-    if verdict == "none":
-        if report["gap"]["unexplained"] and report["gap"]["inseparable"]:
-            report["verdict_confidence"] = None
-            report["verdict_status"] = "none: " + report["gap"]["inseparable_statement"]
-        elif report["gap"]["unexplained"]:
-            report["verdict_confidence"] = None
-            report["verdict_status"] = "none: " + report["gap"]["statement"] + unseen
-        else:
-            report["verdict_status"] = "none: at the noise floor" + unseen
-    elif verdict in OWN_TEST and report["gap"]["unexplained"] and report["gap"]["inseparable"]:
-        report["verdict_status"] = (
-            f"{verdict} on their own latitudes; beside them, "
-            + report["gap"]["inseparable_statement"]
-        )
-    elif verdict in OWN_TEST and unseen:
-        report["verdict_status"] = (
-            f"{report.get('verdict_status') or 'firm'}: {verdict} on their own latitudes" + unseen
-        )
-    elif not report["separable"]:
-        report["verdict_status"] = (
-            (
-                f"tentative: {verdict} is present"
-                + (
-                    f" (confidence {conf:.0%} over resamples of the held-out blocks)"
-                    if conf is not None
-                    else ""
-                )
-                if conf is None or conf >= FIRM_CONFIDENCE
-                else f"tentative: {verdict} is named by the held-out test but wins only "
-                f"{conf:.0%} of the resamples of the held-out blocks"
-            )
-            + ", but its size cannot be separated from the calibration on this span "
-            f"({separation[verdict]['absorbed_fraction']:.0%} of its field is a change of the 12 "
-            f"parameters); what would separate it: {separation[verdict]['would_separate']}"
-        )
-        report["verdict_confidence_of"] = "presence"
-    report["honesty"] = {
-        "residue_tests": residues,
-        "possible_residue": [r["effect"] for r in residues if r["possible_residue"]],
+    report["effects"] = [by_name[n] for n in keep] + [
+        e for e in report["effects"] if e["name"] not in keep
+    ]
+
+
+def _honesty_section(rv: Review) -> dict[str, Any]:
+    return {
+        "residue_tests": rv.residues,
+        "possible_residue": [r["effect"] for r in rv.residues if r["possible_residue"]],
         "inseparable": list(rv.inseparable),
         "orphaned": list(rv.orphaned),
         "overshadowed": list(rv.overshadowed),
-        "fell_back": fell_back,
-        "withdrawn": withdrawn,
+        "fell_back": rv.fell_back,
+        "withdrawn": rv.withdrawn,
         "statement": (
             "the selected model was worse on the held-out blocks than the calibration alone: "
-            f"{', '.join(withdrawn)} withdrawn"
-            if fell_back
+            f"{', '.join(rv.withdrawn)} withdrawn"
+            if rv.fell_back
             else "the final model is no worse than the calibration alone on the held-out blocks"
         ),
     }
-    return report
 
 
 def reviewed(data: DiagnosisData, att: Attribution, rv: Review | None = None) -> Attribution:
