@@ -26,6 +26,7 @@ __all__ = [
     "deciders",
     "gap_section",
     "noise_floor_nt",
+    "noise_ratio",
     "refusal",
     "verdict_status",
 ]
@@ -73,6 +74,17 @@ def noise_floor_nt(residual_nt: FloatArray, mask: BoolArray | None = None) -> fl
     return float(np.sqrt(np.mean(per_axis**2)))
 
 
+def noise_ratio(
+    residual_nt: FloatArray, norm_rms_nt: float, mask: BoolArray | None
+) -> tuple[float, float, float]:
+    """The white-noise floor of ``residual_nt`` on ``mask`` [nT], the held-out RMS per component
+    [nT] (``norm_rms_nt`` / sqrt 3, as the floor) and their ratio [-] (nan without a floor)."""
+    sigma = noise_floor_nt(residual_nt, mask)
+    rms = norm_rms_nt / np.sqrt(3.0)
+    times = float(rms / sigma) if np.isfinite(sigma) and sigma > 0 else float("nan")
+    return sigma, float(rms), times
+
+
 def refusal(e: dict[str, Any]) -> str:
     if e.get("inseparable"):
         return str(e.get("inseparable_reason"))
@@ -115,9 +127,7 @@ def gap_section(
 ) -> dict[str, Any]:
     from orbitcal.diagnose.report import SEPARATING_DATA
 
-    sigma = noise_floor_nt(residual_nt, holdout)
-    rms = rms_nt / np.sqrt(3.0)  # per component, as sigma
-    times = float(rms / sigma) if np.isfinite(sigma) and sigma > 0 else float("nan")
+    sigma, rms, times = noise_ratio(residual_nt, rms_nt, holdout)
     unexplained = bool(np.isfinite(times) and times > GAP_TIMES_NOISE)
     excess = float(np.sqrt(max(rms**2 - sigma**2, 0.0))) if np.isfinite(sigma) else float("nan")
     where = (report.get("final") or {}).get("where") or report.get("where") or {}

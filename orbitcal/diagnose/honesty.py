@@ -49,6 +49,7 @@ from orbitcal.diagnose.gap import (
     INSEPARABLE_LIMIT,
     gap_section,
     noise_floor_nt,
+    noise_ratio,
     verdict_status,
 )
 from orbitcal.diagnose.signed_rank import signed_rank_greater_p
@@ -56,7 +57,7 @@ from orbitcal.diagnose.span_options import ORBIT_S
 from orbitcal.metrics import norm_rms_nt
 
 if TYPE_CHECKING:  # pragma: no cover
-    from orbitcal.diagnose.attribution import Attribution, JointFit
+    from orbitcal.diagnose.attribution import Attribution, EffectScore, JointFit
     from orbitcal.diagnose.effects import DiagnosisData
 
 __all__ = [
@@ -417,8 +418,7 @@ def inseparable_selected(
         return []
     by_name = {e.name: e for e in att.effects}
     fit = att.fits.get("final")
-    sigma = noise_floor_nt(att.final_residual_nt, att.holdout)
-    rms_pc = att.final_rms_nt / np.sqrt(3.0)
+    sigma, rms_pc, _ = noise_ratio(att.final_residual_nt, att.final_rms_nt, att.holdout)
     excess = float(np.sqrt(max(rms_pc**2 - sigma**2, 0.0))) if np.isfinite(sigma) else rms_pc
     out = []
     for n in att.selected:
@@ -434,44 +434,38 @@ def inseparable_selected(
     return out
 
 
-def inseparable_candidates(att: Attribution) -> list[str]:
-    """Every candidate the span cannot tell from the calibration whose fit shrinks the held-out
-    residual below the calibration's alone, best first (selected or not)."""
+def _absorbed(att: Attribution) -> list[EffectScore]:
+    """The candidates (auroral currents aside) at least :data:`INSEPARABLE_LIMIT` of whose
+    fitted field is a change of the 12 parameters on this span (none without a prior)."""
     if att.has_prior:
         return []
-    found = [
+    return [
         e
         for e in att.effects
         if e.name not in OWN_TEST
         and e.absorbed_fraction is not None
         and float(e.absorbed_fraction) >= INSEPARABLE_LIMIT
-        and e.holdout_rms_after_nt < att.baseline_rms_nt
     ]
+
+
+def inseparable_candidates(att: Attribution) -> list[str]:
+    """Every candidate the span cannot tell from the calibration whose fit shrinks the held-out
+    residual below the calibration's alone, best first (selected or not)."""
+    found = [e for e in _absorbed(att) if e.holdout_rms_after_nt < att.baseline_rms_nt]
     return [e.name for e in sorted(found, key=lambda e: e.holdout_rms_after_nt)]
 
 
 def absorbed_candidates(att: Attribution) -> list[str]:
-    """Every candidate (auroral currents aside) at least :data:`INSEPARABLE_LIMIT` of whose
-    fitted field is a change of the 12 parameters on this span, most absorbed first: what the
-    diagnosis cannot see here, whether or not it is present (none without a prior)."""
-    if att.has_prior:
-        return []
-    found = [
-        e
-        for e in att.effects
-        if e.name not in OWN_TEST
-        and e.absorbed_fraction is not None
-        and float(e.absorbed_fraction) >= INSEPARABLE_LIMIT
-    ]
+    """Every candidate the calibration takes up whole on this span, most absorbed first: what
+    the diagnosis cannot see here, whether or not it is present."""
+    found = _absorbed(att)
     return [e.name for e in sorted(found, key=lambda e: -float(e.absorbed_fraction or 0.0))]
 
 
 def gap_times_noise(final: _Final, holdout: BoolArray) -> float:
     """The final held-out residual per component over its white-noise floor [-] (nan when the
     floor cannot be estimated)."""
-    sigma = noise_floor_nt(final.residual_nt, holdout)
-    rms = final.rms_nt / np.sqrt(3.0)
-    return float(rms / sigma) if np.isfinite(sigma) and sigma > 0 else float("nan")
+    return noise_ratio(final.residual_nt, final.rms_nt, holdout)[2]
 
 
 def _verdict(keep: Sequence[str]) -> str:

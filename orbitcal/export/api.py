@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import json
 from typing import TYPE_CHECKING, Any
 
@@ -118,6 +119,14 @@ def held_out_loss(
     )
 
 
+#: The file formats rendered from the calibration form: module and renderer, imported when used.
+_RENDERERS = {
+    "xtce": ("orbitcal.export.xtce", "render_xtce"),
+    "cosmos": ("orbitcal.export.cosmos", "render_cosmos"),
+    "c-header": ("orbitcal.export.c_header", "render_c_header"),
+    "polynomial": ("orbitcal.export.polynomial", "render_polynomial"),
+}
+
 _MEDIA = {
     "json": ("application/json", "calibration.json"),
     "xtce": ("application/xml", "magcal_xtce.xml"),
@@ -148,44 +157,16 @@ def export(doc: dict[str, Any], options: ExportOptions, *, transport: Any = None
         content = (json.dumps(doc, indent=2) + "\n").encode()
         return ExportResult("json", media, info.to_json(), content=content, filename=filename)
     form = calibration_form(doc)
-    if options.format == "xtce":
-        from orbitcal.export.xtce import render_xtce
-
+    if options.format in _RENDERERS:
+        module, name = _RENDERERS[options.format]
+        rendered = getattr(importlib.import_module(module), name)(form, info, options)
+        files = options.format == "cosmos"  # a folder of files; the others one text
         return ExportResult(
-            "xtce",
+            options.format,
             media,
             info.to_json(),
-            content=render_xtce(form, info, options),
-            filename=filename,
-        )
-    if options.format == "cosmos":
-        from orbitcal.export.cosmos import render_cosmos
-
-        return ExportResult(
-            "cosmos",
-            media,
-            info.to_json(),
-            files=render_cosmos(form, info, options),
-            filename=filename,
-        )
-    if options.format == "c-header":
-        from orbitcal.export.c_header import render_c_header
-
-        return ExportResult(
-            "c-header",
-            media,
-            info.to_json(),
-            content=render_c_header(form, info, options),
-            filename=filename,
-        )
-    if options.format == "polynomial":
-        from orbitcal.export.polynomial import render_polynomial
-
-        return ExportResult(
-            "polynomial",
-            media,
-            info.to_json(),
-            content=render_polynomial(form, info, options),
+            content=None if files else rendered,
+            files=rendered if files else None,
             filename=filename,
         )
     from orbitcal.export.yamcs_push import push_to_yamcs

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import struct
 import zlib
+from string import Template
 
 import numpy as np
 
@@ -49,39 +50,33 @@ def _f32_literal(value: float) -> str:
     return repr(v) + "f" if "e" in repr(v) or "." in repr(v) else repr(v) + ".0f"
 
 
-_CODE = """
-/* b_cal = M (b_raw - o - K hk) [nT]; raw in nT, hk in the table units of the column names. */
-static inline void orbitcal_magcal_apply_f64(const double raw[3], const double hk[], double out[3])
+#: One apply function, written once for each precision ($T the C type, $S the suffix).
+_APPLY = Template(
+    """static inline void orbitcal_magcal_apply_$S(const $T raw[3], const $T hk[], $T out[3])
 {
-    const double *M = orbitcal_magcal_table_f64;
-    const double *o = orbitcal_magcal_table_f64 + 9;
-    const double *K = orbitcal_magcal_table_f64 + 12;
-    double b[3];
+    const $T *M = orbitcal_magcal_table_$S;
+    const $T *o = orbitcal_magcal_table_$S + 9;
+    const $T *K = orbitcal_magcal_table_$S + 12;
+    $T b[3];
     int i, j;
     for (i = 0; i < 3; i++) {
-        double s = raw[i] - o[i];
+        $T s = raw[i] - o[i];
         for (j = 0; j < ORBITCAL_MAGCAL_N_HK; j++) s -= K[i * ORBITCAL_MAGCAL_N_HK + j] * hk[j];
         b[i] = s;
     }
     for (i = 0; i < 3; i++) out[i] = M[3 * i] * b[0] + M[3 * i + 1] * b[1] + M[3 * i + 2] * b[2];
 }
+"""
+)
 
-static inline void orbitcal_magcal_apply_f32(const float raw[3], const float hk[], float out[3])
-{
-    const float *M = orbitcal_magcal_table_f32;
-    const float *o = orbitcal_magcal_table_f32 + 9;
-    const float *K = orbitcal_magcal_table_f32 + 12;
-    float b[3];
-    int i, j;
-    for (i = 0; i < 3; i++) {
-        float s = raw[i] - o[i];
-        for (j = 0; j < ORBITCAL_MAGCAL_N_HK; j++) s -= K[i * ORBITCAL_MAGCAL_N_HK + j] * hk[j];
-        b[i] = s;
-    }
-    for (i = 0; i < 3; i++) out[i] = M[3 * i] * b[0] + M[3 * i + 1] * b[1] + M[3 * i + 2] * b[2];
-}
-
-/* CRC-32 (IEEE 802.3, reflected, poly 0xEDB88320) of n bytes. */
+_CODE = (
+    "\n" + "/* b_cal = M (b_raw - o - K hk) [nT]; raw in nT, "
+    "hk in the table units of the column names. */\n"
+    + _APPLY.substitute(T="double", S="f64")
+    + "\n"
+    + _APPLY.substitute(T="float", S="f32")
+    + "\n"
+    + """/* CRC-32 (IEEE 802.3, reflected, poly 0xEDB88320) of n bytes. */
 static inline uint32_t orbitcal_magcal_crc32(const unsigned char *p, size_t n)
 {
     uint32_t crc = 0xFFFFFFFFu;
@@ -103,6 +98,7 @@ static inline int orbitcal_magcal_table_ok(void)
                                  sizeof orbitcal_magcal_table_f32) == ORBITCAL_MAGCAL_CRC32_F32;
 }
 """
+)
 
 
 def render_c_header(
