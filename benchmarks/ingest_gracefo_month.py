@@ -46,6 +46,8 @@ from orbitcal.ingest.l1b_ascii import END_OF_HEADER  # noqa: E402
 AUTH = ROOT / "tests" / "authorities"
 OFFSET_NT = np.array([-530.0, 16.0, 250.0])
 NOISE_NT = 5.0
+#: MAG1B's torquer-current columns, in the order of the injected coupling's columns.
+MAG_CURRENTS = ("torque1A", "torque2A", "torque3A", "torque1B", "torque2B", "torque3B")
 
 
 def _header(product: str, date: str, n: int, start_s: float, stop_s: float) -> str:
@@ -122,9 +124,7 @@ def write_month(workdir: Path, days: int, seed: int = 22) -> dict[str, object]:
             "MfvY_RAW": b_raw[:, 1] / 1000.0,
             "MfvZ_RAW": b_raw[:, 2] / 1000.0,
         }
-        for j, name in enumerate(
-            ["torque1A", "torque2A", "torque3A", "torque1B", "torque2B", "torque3B"]
-        ):
+        for j, name in enumerate(MAG_CURRENTS):
             mag[name] = currents[:, j]
         mag |= {
             "MF_BCalX": np.zeros(nm),
@@ -217,6 +217,27 @@ print(f"{r.summary.rows:,} rows kept")
 """
 
 
+def _coupling_line(report: dict[str, object], injected: dict[str, object]) -> str:
+    """The diagnosis's torquer-current couplings against the injected ones [nT per A]."""
+    effects = report.get("effects") or []
+    assert isinstance(effects, list)
+    mtq = next((e for e in effects if e["name"] == "magnetorquer" and e["significant"]), None)
+    if mtq is None:
+        return "The diagnosis named no magnetorquer coupling."
+    k_nt_per_a = 1e3 * np.asarray(injected["K_nt_per_ma"])
+    diffs = []
+    for i, axis in enumerate("xyz"):
+        for j, ch in enumerate(MAG_CURRENTS):
+            key = f"current_coupling_{axis}_{ch.lower()}_ma_nt_per_a"
+            if key in mtq["params"]:
+                diffs.append(abs(mtq["params"][key] - k_nt_per_a[i, j]))
+    return (
+        f"The diagnosis's magnetorquer coupling of the torquer currents ({len(diffs)} of "
+        f"{k_nt_per_a.size}: idle coils left out) against the injected one: largest difference "
+        f"{max(diffs):.2f} nT/A (injected |K| up to {np.abs(k_nt_per_a).max():.0f} nT/A)."
+    )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--days", type=int, default=31)
@@ -259,7 +280,8 @@ def main() -> None:
     doc = json.loads(cal.read_text())
     day_dir = work / "day1"
     day_dir.mkdir(exist_ok=True)
-    for p in sorted(files.glob("*_2022-07-21_C_04.txt")):
+    day_date = "2022-07-21" if args.days >= 2 else "2022-07-20"  # the second day, or the only one
+    for p in sorted(files.glob(f"*_{day_date}_C_04.txt")):
         (day_dir / p.name).symlink_to(p)
     day = work / "day.parquet"
     w_iday, c_iday, m_iday, _ = _run(
@@ -315,7 +337,13 @@ def main() -> None:
             max(m_i10, m_cal),
             "target ≤ 600 s, ≤ 2048 MB",
         ),
-        ("`ingest gracefo --every-s 1` one day", w_iday, c_iday, m_iday, "2022-07-21, 86,400 rows"),
+        (
+            "`ingest gracefo --every-s 1` one day",
+            w_iday,
+            c_iday,
+            m_iday,
+            f"{day_date}, 86,400 rows",
+        ),
         ("`diagnose` one day", w_diag, c_diag, m_diag, f"verdict `{report.get('verdict')}`"),
     ]
     machine = f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
@@ -343,12 +371,14 @@ def main() -> None:
         f"{np.round(o_fit, 2).tolist()} nT; held-out RMS {doc['metrics']['holdout_rms_nt']:.2f} nT "
         f"(noise {NOISE_NT} nT per axis).",
         "",
-        f"Diagnosis of 2022-07-21 at 1 Hz: baseline `{report['baseline']['method']}` held-out RMS "
+        f"Diagnosis of {day_date} at 1 Hz: baseline `{report['baseline']['method']}` held-out RMS "
         f"{report['baseline']['holdout_rms_nt']:.2f} nT; effects (name, significant, shrink): "
         + ", ".join(
             f"{e['name']} {e['significant']} {e['shrink']:.2f}"
             for e in report.get("effects", [])[:5]
         ),
+        "",
+        _coupling_line(report, injected),
         "",
     ]
     args.out.write_text("\n".join(lines))

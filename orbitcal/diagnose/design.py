@@ -8,6 +8,7 @@ come from a scan of the data (:mod:`orbitcal.diagnose.attitude_scan`).
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import partial
@@ -145,10 +146,49 @@ def _design_temperature(data: DiagnosisData, train: BoolArray) -> DesignBlock | 
     return DesignBlock(g, names)
 
 
+#: Housekeeping channels that carry magnetorquer currents (GRACE-FO MAG1B's ``torque1A`` ...
+#: ``torque3B`` as ``hk_torque1a_ma`` ...), with their unit: milliamperes or amperes.
+TORQUER_CURRENT = re.compile(r"^hk_.*(torq|mtq|magnetorquer).*_(ma|a)$", re.IGNORECASE)
+#: Correlation above which a current channel repeats one already taken (a redundant coil
+#: driven alike): it would add a column the data cannot separate.
+SAME_CHANNEL_CORRELATION = 0.999
+
+
+def torquer_currents(data: DiagnosisData) -> list[tuple[str, FloatArray]]:
+    """The varying magnetorquer-current channels of ``data``, in amperes: ``(name, current_a)``.
+
+    A channel proportional to one already taken is left out."""
+    out: list[tuple[str, FloatArray]] = []
+    for name in data.hk_names:
+        match = TORQUER_CURRENT.match(name)
+        x = data.hk(name)
+        if match is None or x is None or not _varies(x):
+            continue
+        amps = np.asarray(x, dtype=float) * (1e-3 if match.group(2).lower() == "ma" else 1.0)
+        if any(abs(float(np.corrcoef(amps, y)[0, 1])) > SAME_CHANNEL_CORRELATION for _, y in out):
+            continue
+        out.append((name, amps))
+    return out
+
+
 def _design_magnetorquer(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
     cols = [data.hk(f"mtq_{a}") for a in "xyz"]
     if all(c is None or not _varies(c) for c in cols):
-        return None
+        # Without dipole commands, the torquer currents: the coils' field at the sensor is
+        # linear in each coil's current (a 3 x k coupling, nT per A).
+        currents = torquer_currents(data)
+        if not currents:
+            return None
+        g_currents = PerAxisColumns(data.n, [x for _, x in currents], axis_major=True)
+        return DesignBlock(
+            g_currents,
+            [
+                f"current_coupling_{a}_{name.removeprefix('hk_')}_nt_per_a"
+                for a in "xyz"
+                for name, _ in currents
+            ],
+            variant="currents",
+        )
     kinds = [c if c is not None else np.zeros(data.n) for c in cols]
     g = PerAxisColumns(data.n, kinds, axis_major=True)
     names = []

@@ -279,10 +279,18 @@ CATALOGUE: tuple[Effect, ...] = (
     ),
     Effect(
         "magnetorquer",
-        "3x3 coupling of the magnetorquer dipole commands into the sensor",
-        "mtq_x, mtq_y, mtq_z commands; residual steps when they switch",
+        "3x3 coupling of the magnetorquer dipole commands into the sensor (or, without "
+        "commands, a 3 x k coupling of the k torquer currents)",
+        "mtq_x, mtq_y, mtq_z commands, or hk_ torquer currents [mA or A] (hk_torque1a_ma); "
+        "residual steps when they switch",
         _design_magnetorquer,
         param_ranges=(
+            # a coil of <= 100 A m^2 per A (GRACE-FO's: ~ 30 A m^2 at 0.1 A), its dipole field at
+            # d >= 0.27 m
+            (
+                "current_coupling_",
+                symmetric(1.0e6, "torquer field at the sensor <= 1000 nT per mA of coil current"),
+            ),
             # the dipole law 2 mu0 m / (4 pi d^3) at d >= 0.27 m
             ("coupling_", symmetric(1.0e4, "dipole field of 1 A m^2 at >= 0.27 m from the sensor")),
         ),

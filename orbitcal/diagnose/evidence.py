@@ -62,7 +62,12 @@ def _mlat(data: DiagnosisData) -> FloatArray:
 def _torquer(data: DiagnosisData) -> FloatArray | None:
     cols = [data.hk(f"mtq_{a}") for a in "xyz"]
     if all(c is None for c in cols):
-        return None
+        from orbitcal.diagnose.design import torquer_currents
+
+        currents = torquer_currents(data)
+        if not currents:
+            return None
+        return np.asarray(np.linalg.norm(np.stack([x for _, x in currents], axis=1), axis=1))
     stacked = np.stack([c if c is not None else np.zeros(data.n) for c in cols], axis=1)
     return np.asarray(np.linalg.norm(stacked, axis=1))
 
@@ -85,7 +90,12 @@ DRIVERS: dict[str, Driver] = {
         Driver(
             "temperature", "temperature", "sensor temperature [°C]", lambda d: d.hk("temperature")
         ),
-        Driver("torquer_am2", "torquer dipole", "magnetorquer dipole |m| [A·m²]", _torquer),
+        Driver(
+            "torquer_am2",
+            "torquer dipole",
+            "magnetorquer dipole |m| [A·m²] (or, without commands, coil currents |I| [A])",
+            _torquer,
+        ),
         Driver(
             "mlat_deg",
             "magnetic latitude",
