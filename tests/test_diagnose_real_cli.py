@@ -42,13 +42,15 @@ def _pass() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return t, r, b_itrs
 
 
-def _attitude(kind: str, t: np.ndarray, r: np.ndarray, rng: np.random.Generator) -> Rotation:
-    """Body -> ITRS: a spin at 1 deg/s about a random axis, or LVLH (z to nadir, x along track)
-    with a mounting rotation of a few degrees."""
+def _attitude(
+    kind: str, t: np.ndarray, r: np.ndarray, rng: np.random.Generator, rate_deg_s: float = 1.0
+) -> Rotation:
+    """Body -> ITRS: a spin at ``rate_deg_s`` about a random axis, or LVLH (z to nadir, x along
+    track) with a mounting rotation of a few degrees."""
     if kind == "tumbling":
         axis = rng.normal(size=3)
         axis /= np.linalg.norm(axis)
-        spin = Rotation.from_rotvec(np.outer(np.radians(1.0) * (t - t[0]), axis))
+        spin = Rotation.from_rotvec(np.outer(np.radians(rate_deg_s) * (t - t[0]), axis))
         return Rotation.random(random_state=int(rng.integers(1 << 31))) * spin
     v = np.gradient(r, t, axis=0)
     z = -r / np.linalg.norm(r, axis=1, keepdims=True)
@@ -58,13 +60,13 @@ def _attitude(kind: str, t: np.ndarray, r: np.ndarray, rng: np.random.Generator)
     return Rotation.from_matrix(m) * Rotation.from_rotvec(np.radians(rng.uniform(-5, 5, size=3)))
 
 
-def _table(path: Path, kind: str, seed: int) -> None:
+def _table(path: Path, kind: str, seed: int, rate_deg_s: float = 1.0) -> None:
     t, r, b_itrs = _pass()
     rng = np.random.default_rng(seed)
     a = np.eye(3) + rng.normal(scale=rng.uniform(0.005, 0.03), size=(3, 3))
     offset = rng.uniform(50.0, 500.0, size=3) * rng.choice([-1.0, 1.0], size=3)
     noise = rng.uniform(0.5, 2.0)
-    rot = _attitude(kind, t, r, rng)
+    rot = _attitude(kind, t, r, rng, rate_deg_s)
     raw = rot.inv().apply(b_itrs) @ a.T + offset + rng.normal(scale=noise, size=b_itrs.shape)
     q = rot.as_quat()  # x, y, z, w
     cols = np.column_stack([t, raw, q[:, [3, 0, 1, 2]], r])
@@ -102,3 +104,30 @@ def test_the_storm_pass_through_the_command_line(tmp_path: Path, kind: str, seed
         # parameters on this span: nothing can be named, and the report says what would decide.
         assert explicit, status
         assert "prior calibration" in status
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("seed", "immaterial", "verdict"),
+    [(3314, "nonlinearity", "external_field"), (3317, "time_offset", "none")],
+)
+def test_a_small_gain_beside_a_large_gap_is_not_named(
+    tmp_path: Path, seed: int, immaterial: str, verdict: str
+) -> None:
+    # A slow tumble (0.3 deg/s: half a turn in the 30 minutes): the held-out residual stays
+    # 50-100 x the noise floor whatever is fitted, and a flexible effect that removes a few per
+    # cent of it was named (drawn after the rule was written: seeds 3300-3329, the two it acts on).
+    table, out = tmp_path / "pass.csv", tmp_path / "report.json"
+    _table(table, "tumbling", seed, rate_deg_s=0.3)
+    assert main(["diagnose", str(table), "--attitude-frame", "ITRS", "--out", str(out)]) == 0
+    report = json.loads(out.read_text())
+    by_name = {e["name"]: e for e in report["effects"]}
+    assert report["honesty"]["immaterial"] == [immaterial]
+    assert by_name[immaterial]["significant"] is False
+    assert by_name[immaterial]["status"] == "immaterial"
+    assert report["verdict"] == verdict
+    assert {e["name"] for e in report["effects"] if e["significant"]} <= ALLOWED
+    assert report["gap"]["unexplained"] and report["gap"]["times_noise"] > 10.0
+    if verdict == "none":
+        assert report["verdict_status"].startswith("none: an unexplained gap")
+        assert report["verdict_confidence"] is None

@@ -90,6 +90,8 @@ def refusal(e: dict[str, Any]) -> str:
         return str(e.get("inseparable_reason"))
     if e.get("status") == "implausible":
         return f"implausible: {e.get('implausible_reason')}"
+    if e.get("status") == "immaterial":
+        return f"immaterial: {e.get('immaterial_reason')}"
     if e.get("status") == "possible residue":
         return str(e.get("residue_reason"))
     absorbed = e.get("absorbed_by_calibration_fraction")

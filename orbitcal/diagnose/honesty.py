@@ -86,6 +86,11 @@ OWN_TEST = frozenset({"field_aligned_currents"})
 #: A candidate the span cannot tell from the calibration that leaves less than 1 / this of the
 #: selected model's held-out residual overshadows the selection (:func:`_overshadowed`).
 OVERSHADOW_RATIO = 2.0
+#: On a span shorter than an orbit, an effect whose own share of the held-out RMS is below
+#: :data:`MATERIAL_GAIN` while the final held-out residual stays above
+#: :data:`LARGE_GAP_TIMES_NOISE` times the noise floor is immaterial (:func:`_immaterial`).
+MATERIAL_GAIN = 0.10
+LARGE_GAP_TIMES_NOISE = 10.0
 
 
 @dataclass(frozen=True)
@@ -298,6 +303,7 @@ class Review:
     inseparable: list[str] = field(default_factory=list)
     orphaned: list[str] = field(default_factory=list)
     overshadowed: list[str] = field(default_factory=list)
+    immaterial: list[str] = field(default_factory=list)
     gap_unexplained: bool = False
     verdict: str = "none"
 
@@ -353,6 +359,10 @@ def review(data: DiagnosisData, att: Attribution) -> Review:
     if overshadowed:
         keep = [n for n in keep if n not in overshadowed]
         final = _refit(data, att, fit_names, keep) if fit_names else final
+    immaterial = _immaterial(data, att, fit_names, keep, final)
+    if immaterial:
+        keep = [n for n in keep if n not in immaterial]
+        final = _refit(data, att, fit_names, keep)
     fell_back = False
     withdrawn: list[str] = []
     while final.rms_nt > att.baseline_rms_nt and keep and fit_names:
@@ -376,9 +386,38 @@ def review(data: DiagnosisData, att: Attribution) -> Review:
         inseparable=inseparable,
         orphaned=orphaned,
         overshadowed=overshadowed,
+        immaterial=immaterial,
         gap_unexplained=unexplained,
         verdict=_verdict(keep),
     )
+
+
+def _immaterial(
+    data: DiagnosisData,
+    att: Attribution,
+    fit_names: Sequence[str],
+    keep: Sequence[str],
+    final: _Final,
+) -> list[str]:
+    """The kept effects with a field that remove less than :data:`MATERIAL_GAIN` of the held-out
+    RMS (drop-one, beside the others kept) while the final held-out residual stays more than
+    :data:`LARGE_GAP_TIMES_NOISE` times the noise floor; spans shorter than an orbit only.
+
+    There the held-out blocks are one stretch of track and a residual a hundred times the noise is
+    one smooth misfit: its chunks are not independent, and any flexible column that bends the
+    calibration's extrapolation a little shrinks all of them at once (tumbling storm-pass draws:
+    a time offset named for 3-6 % of 290 nT). Such a gain says nothing of the effect."""
+    if att.has_prior or att.span_s >= ORBIT_S or not fit_names:
+        return []
+    if not gap_times_noise(final, att.holdout) > LARGE_GAP_TIMES_NOISE:
+        return []
+    out = []
+    for name in [n for n in keep if n not in OWN_TEST and n in fit_names]:
+        without = _refit(data, att, fit_names, [n for n in keep if n != name])
+        gain = 1.0 - final.rms_nt / max(without.rms_nt, 1e-12)
+        if 0.0 <= gain < MATERIAL_GAIN:  # a loss is the fall-back's (the model is worse)
+            out.append(name)
+    return out
 
 
 def _overshadowed(att: Attribution, keep: Sequence[str], final: _Final) -> list[str]:
@@ -559,6 +598,16 @@ def _mark_withdrawn(report: dict[str, Any], att: Attribution, rv: Review) -> Non
             f"residual more than {OVERSHADOW_RATIO:g} x better than the model with it: its gain "
             "may be a fragment of the same misfit"
         )
+    for name in rv.immaterial:
+        e = by_name[name]
+        e["significant"] = False
+        e["status"] = "immaterial"
+        e["immaterial_reason"] = (
+            f"it removes less than {MATERIAL_GAIN:.0%} of a held-out residual more than "
+            f"{LARGE_GAP_TIMES_NOISE:g} x the noise floor: on a span shorter than an orbit that "
+            "residual is one smooth misfit whose chunks are not independent, and a gain this "
+            "small is what bending the calibration's extrapolation does"
+        )
     for name in rv.orphaned:
         e = by_name[name]
         e["significant"] = False
@@ -605,6 +654,7 @@ def _honesty_section(rv: Review) -> dict[str, Any]:
         "inseparable": list(rv.inseparable),
         "orphaned": list(rv.orphaned),
         "overshadowed": list(rv.overshadowed),
+        "immaterial": list(rv.immaterial),
         "fell_back": rv.fell_back,
         "withdrawn": rv.withdrawn,
         "statement": (
