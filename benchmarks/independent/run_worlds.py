@@ -96,6 +96,8 @@ def main() -> None:
     ap.add_argument("--null-per-kind", type=int, default=3)
     ap.add_argument("--seed", type=int, default=1000)
     ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--keep", type=Path, default=None, help="keep each table, TLE and report here")
+    ap.add_argument("--only", type=int, nargs="+", default=None, help="run these worlds only")
     args = ap.parse_args()
     plan: list[tuple[list[str], str, bool]] = []
     pick = np.random.default_rng(args.seed)
@@ -107,12 +109,17 @@ def main() -> None:
     rows = []
     t0 = time.time()
     with tempfile.TemporaryDirectory() as tmp:
+        where = args.keep or Path(tmp)
+        where.mkdir(parents=True, exist_ok=True)
         for i, (effects, noise, small) in enumerate(plan):
+            if args.only is not None and i not in args.only:
+                continue
             rng = np.random.default_rng([args.seed, i])
             world = make_world(rng, effects, noise=noise, small_unmodelled=small)
-            table, tle = Path(tmp) / "world.csv", Path(tmp) / "world.tle"
+            stem = f"world_{i}" if args.keep else "world"
+            table, tle = where / f"{stem}.csv", where / f"{stem}.tle"
             world.write(table, tle)
-            rep = run_cli(table, Path(tmp) / "report.json", tle=tle)
+            rep = run_cli(table, where / f"{stem}.json", tle=tle)
             row = {
                 "world": i,
                 "injected": effects,

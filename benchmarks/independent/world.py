@@ -19,7 +19,7 @@ Effects have their own shapes, from the physics rather than from the diagnosis's
 * ``attitude_error``: small rotations (twice-per-orbit thermal flex plus a random walk).
 * ``orbit_error``: the truth is propagated from a later element set of the same satellite; the
   user is given the older one.
-* ``crustal_field``: CHAOS-7 static field, degrees 16-185, scaled.
+* ``crustal_field``: CHAOS-7 static field, degrees 16-185 (none below 21 in CHAOS-7), scaled.
 
 Noise kinds: ``white``, ``pink`` (1/f), ``random_walk``, ``quantised``, ``spikes``, ``gaps``.
 """
@@ -215,13 +215,20 @@ def _crust_coefficients() -> np.ndarray:
 def crust_itrs_nt(
     r_itrs_km: np.ndarray, nmin: int = 16, nmax: int = 185, stride: int = 10
 ) -> np.ndarray:
-    """CHAOS-7 static field; evaluated every ``stride`` samples and interpolated linearly."""
+    """CHAOS-7 static field, degrees ``nmin`` to ``nmax`` (its coefficients below degree 21 are
+    zero); evaluated every ``stride`` samples and interpolated linearly.
+
+    chaosmagpy's ``synth_values`` reads its coefficient array as starting at degree ``nmin``:
+    the array is cut there. (Until 2026-11-26 the whole array went in with ``nmin=16``, which
+    shifted every coefficient by 255 places: the "crust" of the worlds was a scrambled
+    Earth-fixed field that no crustal model could explain; runs before that date scored crustal
+    worlds against it.)"""
     coeffs = _crust_coefficients()
-    n_coef = nmax * (nmax + 2)
+    first, n_coef = (nmin - 1) * (nmin + 1), nmax * (nmax + 2)
     idx = np.arange(0, len(r_itrs_km), stride)
     if idx[-1] != len(r_itrs_km) - 1:
         idx = np.append(idx, len(r_itrs_km) - 1)
-    nec = _synth_nec(coeffs[:n_coef], r_itrs_km[idx], nmax, nmin)
+    nec = _synth_nec(coeffs[first:n_coef], r_itrs_km[idx], nmax, nmin)
     full = np.column_stack([np.interp(np.arange(len(r_itrs_km)), idx, nec[:, k]) for k in range(3)])
     return nec_to_itrs(full, r_itrs_km)
 
