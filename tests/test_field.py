@@ -82,6 +82,26 @@ def test_crustal_models_match_chaosmagpy(name: str, filename: str, nmin: int, nm
     assert 1.0 < np.sqrt(np.mean(b[50:] ** 2)) < 20.0
 
 
+def test_a_crustal_model_above_the_main_field_leaves_out_its_low_degrees() -> None:
+    """What a crustal model adds to IGRF (degree 13) is its part above 13: LCS-1 from degree 14 is
+    chaosmagpy's LCS-1 with its degrees 1..13 zeroed; MF7 (from 16) is unchanged."""
+    from orbitcal.diagnose.prepare import main_field_nmax
+    from orbitcal.field.crust import crustal_field_above
+
+    assert main_field_nmax("IGRF-14") == 13 and main_field_nmax("CHAOS-8.1+LCS-1+RC") == 20
+    rng = np.random.default_rng(6)
+    r, colat, lon = _points(rng, 60)
+    above = crustal_field_above("LCS-1", 14)
+    assert (above.nmin, above.nmax) == (14, 185)
+    ref = _chaosmagpy_model("LCS-1.shc")
+    coeffs = np.array(ref.coeffs, copy=True)
+    coeffs[..., : 13 * 15] = 0.0  # degrees 1..13: n (n + 2) = 195 coefficients
+    b_ref = _nec(*chaosmagpy.model_utils.synth_values(coeffs.reshape(-1), r, colat, lon))
+    b = above.b_nec_nt(np.zeros(60), r, colat, lon)
+    assert np.abs(b - b_ref).max() < 1e-6
+    assert crustal_field_above("MF7", 14) is get_field("MF7")
+
+
 def test_get_field_names_and_composition() -> None:
     assert get_field().name == "IGRF-14" == field_pkg.DEFAULT_FIELD
     combo = get_field("CHAOS-8.1+CHAOS-8.1-static+RC")

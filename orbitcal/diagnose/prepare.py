@@ -107,6 +107,44 @@ def field_body_nt(
     return np.asarray(np.einsum("nij,nj->ni", rot, b_itrs))
 
 
+def main_field_nmax(field_name: str) -> int:
+    """The highest degree of the main-field terms of a reference field name (0 when none)."""
+    from orbitcal.field import MAIN_FIELD_NAMES, get_field
+
+    degrees = [
+        int(getattr(get_field(term), "nmax", 0))
+        for term in (x.strip() for x in field_name.split("+"))
+        if term in MAIN_FIELD_NAMES
+    ]
+    return max(degrees, default=0)
+
+
+def crust_body_nt(
+    crust_model: str, reference_field: str, t: FloatArray, r_itrs_km: FloatArray, rot: FloatArray
+) -> FloatArray | None:
+    """The crustal candidate in body axes [nT], (N, 3): the crustal model above the reference
+    field's main-field degree (:func:`orbitcal.field.crust.crustal_field_above`), evaluated at
+    most :data:`CRUST_KNOT_SPACING_S` apart along the track; None (with a warning) for a model
+    that is not a crustal model of the catalogue or cannot be evaluated."""
+    from orbitcal import frames
+    from orbitcal.field.crust import CRUSTAL_MODELS, crustal_field_above
+
+    if crust_model not in CRUSTAL_MODELS:
+        return field_body_nt(crust_model, t, r_itrs_km, rot, knot_spacing_s=CRUST_KNOT_SPACING_S)
+    model = crustal_field_above(crust_model, main_field_nmax(reference_field) + 1)
+
+    def itrs(tt: FloatArray, rr: FloatArray) -> FloatArray:
+        radius, colat, lon = frames.itrs_to_spherical(rr)
+        return np.asarray(frames.nec_to_itrs(model.b_nec_nt(tt, radius, colat, lon), rr))
+
+    try:
+        b_itrs = along_track(itrs, t, r_itrs_km, CRUST_KNOT_SPACING_S)
+    except ValueError as exc:  # pragma: no cover - a static model has no span to leave
+        warnings.warn(f"{crust_model} not used as a candidate regressor: {exc}", stacklevel=3)
+        return None
+    return np.asarray(np.einsum("nij,nj->ni", rot, b_itrs))
+
+
 def diagnosis_data(
     telemetry: Telemetry,
     *,
@@ -154,9 +192,7 @@ def diagnosis_data(
     x_hk, names = _housekeeping(telemetry)
     rc_index, b_ext_body = _ring_current(t, r_itrs, rot) if options.external_model else (None, None)
     b_crust_body = (
-        field_body_nt(crust_model, t, r_itrs, rot, knot_spacing_s=CRUST_KNOT_SPACING_S)
-        if crust_model
-        else None
+        crust_body_nt(crust_model, options.field, t, r_itrs, rot) if crust_model else None
     )
     return DiagnosisData(
         t_utc_s=t,

@@ -20,7 +20,7 @@ from orbitcal.field._base import SphericalHarmonicModel
 from orbitcal.field.chaos import field_data_path
 from orbitcal.field.shc import read_shc
 
-__all__ = ["CRUSTAL_MODELS", "crustal_field"]
+__all__ = ["CRUSTAL_MODELS", "crustal_field", "crustal_field_above"]
 
 #: Crustal model names and their .shc files in ``orbitcal/field/data/``.
 CRUSTAL_MODELS: dict[str, str] = {
@@ -48,5 +48,27 @@ def crustal_field(name: str) -> SphericalHarmonicModel:
         nmax=shc.nmax,
         breaks_mjd2000=np.array([0.0, 0.0]),
         coeffs_pp_flat=shc.coeffs_flat[None, :, :],
+        static=True,
+    )
+
+
+@lru_cache(maxsize=8)
+def crustal_field_above(name: str, nmin: int) -> SphericalHarmonicModel:
+    """The crustal model ``name`` from degree ``nmin`` on (its own lowest degree if higher).
+
+    A main-field model of degree ``N`` (IGRF: 13, CHAOS core: 20) is fitted to the whole internal
+    field up to ``N``, the lithosphere's long wavelengths included: what a crustal model adds to
+    it is its part above ``N``. LCS-1 starts at degree 1; its degrees 1..13 (0.7 nT rms at 460 km
+    of its 2.1) are already in IGRF.
+    """
+    model = crustal_field(name)
+    if nmin <= model.nmin:
+        return model
+    return SphericalHarmonicModel(
+        f"{name} (n >= {nmin})",
+        nmin=nmin,
+        nmax=model.nmax,
+        breaks_mjd2000=model.breaks_mjd2000,
+        coeffs_pp_flat=model.coeffs_pp_flat,
         static=True,
     )
