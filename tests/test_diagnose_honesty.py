@@ -362,3 +362,67 @@ def test_a_selection_overshadowed_by_an_inseparable_candidate_is_withdrawn() -> 
     from orbitcal.diagnose.honesty import inseparable_candidates
 
     assert inseparable_candidates(att) == ["sun_driven"]  # a separable candidate is not listed
+
+
+def _walk(rng: np.random.Generator, n: int) -> np.ndarray:
+    w = np.cumsum(rng.normal(size=(n, 3)), axis=0)
+    w -= w.mean(axis=0)
+    return np.asarray(w / w.std(axis=0))
+
+
+def _plain_chunk_p(r0: np.ndarray, r1: np.ndarray, chunks: int) -> float:
+    from orbitcal.diagnose.signed_rank import signed_rank_greater_p
+
+    e0, e1 = np.sum(r0**2, axis=1), np.sum(r1**2, axis=1)
+    parts = np.array_split(np.arange(e0.size), chunks)
+    return signed_rank_greater_p(np.array([np.log(e0[c].mean() / e1[c].mean()) for c in parts]))
+
+
+@pytest.mark.parametrize("seed", [0, 3, 4])
+def test_a_gain_that_wanders_with_a_random_walk_is_not_significant_on_correlated_chunks(
+    seed: int,
+) -> None:
+    """Two random-walk residuals (before and after a fit that follows part of the wander): the
+    chunk test taking chunks as independent calls the gain significant, the correlated one not."""
+    from orbitcal.diagnose.honesty import CORRELATED_ALPHA, CORRELATED_CHUNKS, correlated_chunk_p
+
+    rng = np.random.default_rng(seed)
+    n = 960
+    white = rng.normal(size=(n, 3))
+    before = white + 2.0 * _walk(rng, n)
+    after = white + 1.6 * _walk(rng, n)
+    held = np.ones(n, dtype=bool)
+    assert _plain_chunk_p(before, after, CORRELATED_CHUNKS) < 0.01  # the premise
+    assert correlated_chunk_p(before, after, held) >= CORRELATED_ALPHA
+
+
+def test_a_gain_that_holds_in_every_chunk_stays_significant_on_correlated_chunks() -> None:
+    """A smooth field removed whole: its gain follows the orbit smoothly but never changes sign."""
+    from orbitcal.diagnose.honesty import correlated_chunk_p
+
+    rng = np.random.default_rng(1)
+    n = 960
+    white = rng.normal(size=(n, 3))
+    t = np.arange(n)
+    field = 3.0 * np.column_stack([np.sin(t / 50), np.cos(t / 70), np.sin(t / 90 + 1)])
+    assert correlated_chunk_p(white + field, white, np.ones(n, dtype=bool)) < 1e-5
+
+
+def test_a_verdict_another_template_draws_on_a_short_span_is_named_with_it() -> None:
+    """A third of an orbit, spinning: the along-track orbit error's field reproduces the uniform
+    external field's beyond the calibration, and the report names both; on other draws no
+    candidate does, and none is named."""
+    from test_diagnose_worlds import make_world
+
+    from orbitcal.diagnose import attribute
+    from orbitcal.diagnose.honesty import _fit_names, confounded_with
+    from orbitcal.diagnose.options import AttributionOptions
+
+    found = {}
+    for seed in (0, 4):
+        w = make_world("external_field", attitude="tumbling", seed=seed, n_orbits=0.33, step_s=2.0)
+        att = attribute(w.data, options=AttributionOptions(split_tests=False, holdout_blocks=2))
+        assert att.verdict == "external_field"
+        found[seed] = confounded_with(w.data, att, "external_field", _fit_names(att))
+    assert found[0] == []
+    assert [n for n, _ in found[4]] == ["orbit_error"] and found[4][0][1] > 0.99

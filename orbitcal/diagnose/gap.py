@@ -90,6 +90,8 @@ def refusal(e: dict[str, Any]) -> str:
         return str(e.get("inseparable_reason"))
     if e.get("status") == "implausible":
         return f"implausible: {e.get('implausible_reason')}"
+    if e.get("status") == "not significant on correlated chunks":
+        return f"not significant on correlated chunks: {e.get('correlated_reason')}"
     if e.get("status") == "immaterial":
         return f"immaterial: {e.get('immaterial_reason')}"
     if e.get("status") == "possible residue":
@@ -110,13 +112,17 @@ def deciders(names: Sequence[str]) -> str:
     """What data would tell ``names`` from the calibration, each idea once."""
     from orbitcal.diagnose.report import SEPARATING_DATA
 
-    ideas: list[str] = ["a prior calibration (orbitcal diagnose --calibration CAL.json)"]
+    ideas: dict[str, str] = {
+        "a prior calibration": "a prior calibration (orbitcal diagnose --calibration CAL.json)"
+    }
     for n in names:
         for part in SEPARATING_DATA.get(n, "").replace(" or ", ", ").split(", "):
             part = part.strip()
-            if part and "prior calibration" not in part and part not in ideas:
-                ideas.append(part)
-    return "; ".join(ideas)
+            # one entry per idea: "a longer span" and "a longer span (several orbits)" are one
+            key = part.split(" (")[0]
+            if part and key not in ideas:
+                ideas[key] = part
+    return "; ".join(ideas.values())
 
 
 def gap_section(

@@ -21,6 +21,19 @@ against the same held-out data, and says so where a claim does not hold:
   blocks is ``overshadowed``. The verdict's status then says that the gap cannot be separated
   from the calibration on this span, names the candidates, and what would decide -- under nadir
   pointing on the real Swarm storm pass every candidate but the crust is so.
+* **Immaterial.** On a span shorter than an orbit, an effect that removes less than
+  :data:`MATERIAL_GAIN` of a held-out residual still more than :data:`LARGE_GAP_TIMES_NOISE`
+  times the noise floor is withdrawn (:func:`_immaterial`): such a residual is one smooth misfit,
+  and any flexible column bends it a little in every chunk at once.
+* **Correlated chunks.** A flexible effect that stands must still shrink the held-out residual when
+  the chunks of the test count as the independent stretches they are: the variance of the
+  signed-rank score is inflated by the autocorrelation of the per-chunk gains' signs
+  (:func:`correlated_chunk_p`). A gain that comes and goes with a slow wander of the residual (a
+  random-walk offset) is not significant; one that holds in every chunk is untouched.
+* **Confounded.** A candidate that draws the verdict's own field (beyond the calibration) on this
+  span and explains the held-out residual nearly as well is named beside the verdict, with what
+  would decide (:func:`confounded_with`): under a spin about one axis a field fixed in space is a
+  Sun-driven field's matrix times the Sun direction.
 * **Never worse than the baseline.** If the final model's held-out RMS exceeds the calibration's
   alone, the last effects are withdrawn until it does not (falling back to the calibration
   alone), and the report says so (``honesty.fell_back``).
@@ -36,6 +49,8 @@ against the same held-out data, and says so where a claim does not hold:
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -47,6 +62,7 @@ from orbitcal.diagnose.effects import effect_param_range
 from orbitcal.diagnose.gap import (
     GAP_TIMES_NOISE,
     INSEPARABLE_LIMIT,
+    deciders,
     gap_section,
     noise_floor_nt,
     noise_ratio,
@@ -58,6 +74,7 @@ from orbitcal.metrics import norm_rms_nt
 
 if TYPE_CHECKING:  # pragma: no cover
     from orbitcal.diagnose.attribution import Attribution, EffectScore, JointFit
+    from orbitcal.diagnose.design import DesignBlock
     from orbitcal.diagnose.effects import DiagnosisData
 
 __all__ = [
@@ -91,6 +108,16 @@ OVERSHADOW_RATIO = 2.0
 #: :data:`LARGE_GAP_TIMES_NOISE` times the noise floor is immaterial (:func:`_immaterial`).
 MATERIAL_GAIN = 0.10
 LARGE_GAP_TIMES_NOISE = 10.0
+#: A candidate whose design (with the calibration's) reproduces at least this share of the
+#: verdict's fitted field beyond the calibration, and leaves at most :data:`CONFOUND_RATIO` times
+#: the verdict's held-out residual, cannot be told from the verdict on this span
+#: (:func:`confounded_with`).
+CONFOUND_SHARE = 0.9
+CONFOUND_RATIO = 1.5
+#: Chunks of the held-out span and the one-sided level of the correlated-chunk check
+#: (:func:`_correlated`).
+CORRELATED_CHUNKS = 32
+CORRELATED_ALPHA = 0.05
 
 
 @dataclass(frozen=True)
@@ -304,6 +331,7 @@ class Review:
     orphaned: list[str] = field(default_factory=list)
     overshadowed: list[str] = field(default_factory=list)
     immaterial: list[str] = field(default_factory=list)
+    correlated: list[str] = field(default_factory=list)
     gap_unexplained: bool = False
     verdict: str = "none"
 
@@ -363,6 +391,10 @@ def review(data: DiagnosisData, att: Attribution) -> Review:
     if immaterial:
         keep = [n for n in keep if n not in immaterial]
         final = _refit(data, att, fit_names, keep)
+    correlated = _correlated(data, att, fit_names, keep, final)
+    if correlated:
+        keep = [n for n in keep if n not in correlated]
+        final = _refit(data, att, fit_names, keep)
     fell_back = False
     withdrawn: list[str] = []
     while final.rms_nt > att.baseline_rms_nt and keep and fit_names:
@@ -387,6 +419,7 @@ def review(data: DiagnosisData, att: Attribution) -> Review:
         orphaned=orphaned,
         overshadowed=overshadowed,
         immaterial=immaterial,
+        correlated=correlated,
         gap_unexplained=unexplained,
         verdict=_verdict(keep),
     )
@@ -416,6 +449,70 @@ def _immaterial(
         without = _refit(data, att, fit_names, [n for n in keep if n != name])
         gain = 1.0 - final.rms_nt / max(without.rms_nt, 1e-12)
         if 0.0 <= gain < MATERIAL_GAIN:  # a loss is the fall-back's (the model is worse)
+            out.append(name)
+    return out
+
+
+def correlated_chunk_p(
+    r_without: FloatArray, r_with: FloatArray, holdout: BoolArray, chunks: int = CORRELATED_CHUNKS
+) -> float:
+    """One-sided p that the held-out residual shrinks, counting correlated chunks as fewer.
+
+    The per-chunk log ratios of the mean squares (:data:`CORRELATED_CHUNKS` consecutive chunks)
+    are ranked as in the selection's test; the variance of their signed-rank score is inflated by
+    ``1 + 2 sum rho_k`` of their signs about the mean sign (Bartlett cut): a gain that comes and
+    goes with a slow wander of the residual (a random-walk offset, a misfit over the orbit) counts
+    as the few independent stretches it spans, a gain that holds chunk after chunk does not."""
+    from orbitcal.diagnose.attribution.uncertainty import _autocorr_inflation
+    from orbitcal.diagnose.signed_rank import signed_rank_z
+
+    e0 = np.sum(r_without[holdout] ** 2, axis=1)
+    e1 = np.sum(r_with[holdout] ** 2, axis=1)
+    parts = [c for c in np.array_split(np.arange(e0.size), chunks) if c.size]
+    d = np.array([np.log(max(e0[c].mean(), 1e-300) / max(e1[c].mean(), 1e-300)) for c in parts])
+    if d.size < 8:
+        return float("nan")
+    z = signed_rank_z(d)
+    if not np.isfinite(z):
+        return float("nan")
+    # The inflation from the signs of the log ratios: a gain that holds in every chunk has no
+    # sign to wander (however smoothly its size follows the orbit) and keeps its score.
+    z_eff = z / np.sqrt(_autocorr_inflation(np.sign(d)))
+    return float(0.5 * math.erfc(z_eff / math.sqrt(2.0)))
+
+
+def _correlated(
+    data: DiagnosisData,
+    att: Attribution,
+    fit_names: Sequence[str],
+    keep: Sequence[str],
+    final: _Final,
+) -> list[str]:
+    """The kept flexible effects (:data:`FLEXIBLE`: those that take up what another effect's
+    template or the noise leaves) whose drop-one held-out gain is not significant once
+    correlated chunks count as fewer (:func:`correlated_chunk_p`), tested where each acts (the
+    selection's support: held-out samples where its fitted field exceeds 10 % of its training
+    peak, in as many chunks as the selection cut them into)."""
+    from orbitcal.diagnose.attribution.significance import _support
+
+    if not fit_names or final.fit is None:
+        return []
+    out = []
+    names = [n for n in fit_names if n in keep]  # the blocks of ``final.fit``, in order
+    for name in [n for n in names if n in FLEXIBLE]:
+        without = _refit(data, att, fit_names, [n for n in keep if n != name])
+        if final.rms_nt > without.rms_nt:
+            continue  # a loss is the fall-back's (the model is worse with it)
+        sup, chunks = _support(
+            final.fit,
+            att.train,
+            att.holdout,
+            CORRELATED_CHUNKS,
+            CORRELATED_CHUNKS // 2,
+            k=names.index(name),
+        )
+        p = correlated_chunk_p(without.residual_nt, final.residual_nt, sup, chunks)
+        if np.isfinite(p) and p >= CORRELATED_ALPHA:
             out.append(name)
     return out
 
@@ -471,6 +568,65 @@ def inseparable_selected(
         if remainder < excess:
             out.append(n)
     return out
+
+
+def _variant_block(
+    data: DiagnosisData, train: BoolArray, name: str, variant: str | None
+) -> DesignBlock | None:
+    """The design of ``name`` in its reported variant (else its first form)."""
+    from orbitcal.diagnose.effects import get_effect
+
+    block = get_effect(name).design(data, train)
+    if block is None:
+        return None
+    for b in (block, *block.alternatives):
+        if variant and b.variant == variant:
+            return b
+    return block
+
+
+def confounded_with(
+    data: DiagnosisData, att: Attribution, verdict: str, fit_names: Sequence[str]
+) -> list[tuple[str, float]]:
+    """Candidates the span cannot tell from the verdict, with the share of the verdict's fitted
+    field beyond the calibration that each reproduces (least squares on the training samples,
+    the 12 parameters and the candidate's design free), best first.
+
+    Under a spin about one axis, a field fixed in space (a ring current) is a Sun-driven field's
+    matrix times the Sun direction, and a time shift is a change of the body rates' projection:
+    two templates can draw the same field on a short span. Such a candidate explains the held-out
+    residual nearly as well (within :data:`CONFOUND_RATIO`) and reproduces at least
+    :data:`CONFOUND_SHARE` of the verdict's own part; the report then names it."""
+    from orbitcal.diagnose.attribution import fit_joint
+
+    fit = att.fits.get("final")
+    by_name = {e.name: e for e in att.effects}
+    if fit is None or verdict not in fit_names or verdict not in by_name:
+        return []
+    f = fit.effect_nt(list(fit_names).index(verdict))
+    a = float(by_name[verdict].absorbed_fraction or 0.0)
+    beyond = (1.0 - a) * float(np.sum(f[att.train] ** 2))
+    if beyond <= 0.0:
+        return []
+    probe = dataclasses.replace(data, b_raw_nt=data.b_ref_body_nt + f)
+    out = []
+    for e in att.effects:
+        if (
+            e.name == verdict
+            or e.name in att.selected
+            or e.name in OWN_TEST
+            or e.holdout_rms_after_nt > CONFOUND_RATIO * by_name[verdict].holdout_rms_after_nt
+        ):
+            continue
+        block = _variant_block(data, att.train, e.name, e.params.get("variant"))
+        if block is None:
+            continue
+        rival = fit_joint(probe, att.train, [block], robust=False, bounded=False, use_prior=False)
+        orth = (probe.b_raw_nt - rival.predict_nt(probe))[att.train]
+        share = 1.0 - float(np.sum(orth**2)) / beyond
+        if share >= CONFOUND_SHARE:
+            out.append((e.name, min(share, 1.0)))
+    return sorted(out, key=lambda x: -x[1])
 
 
 def _absorbed(att: Attribution) -> list[EffectScore]:
@@ -542,6 +698,11 @@ def review_report(
     if changed:
         _final_section(report, data, att, rv)
     if changed and rv.verdict != report["verdict"]:
+        # the attribution's status spoke of the verdict withdrawn, not of this one
+        report["verdict_status"] = (
+            f"{rv.verdict} stands after the review withdrew {report['verdict']} (see each "
+            "effect's status); no resampling confidence"
+        )
         report["verdict"] = rv.verdict
         report["verdict_confidence"] = None
     report["gap"] = gap_section(
@@ -555,8 +716,41 @@ def review_report(
     absorbed = absorbed_candidates(att)
     report["gap"]["absorbed_by_calibration"] = absorbed
     verdict_status(report, absorbed, OWN_TEST)
+    _confounding_words(report, data, att, rv)
     report["honesty"] = _honesty_section(rv)
     return report
+
+
+def _confounding_words(
+    report: dict[str, Any], data: DiagnosisData, att: Attribution, rv: Review
+) -> None:
+    """``confounded_with`` and the verdict status's words for candidates the span cannot tell
+    from the verdict (:func:`confounded_with`)."""
+    verdict = report["verdict"]
+    found = (
+        confounded_with(data, att, verdict, _fit_names(att))
+        if verdict in att.selected and rv.keep and rv.keep[0] == verdict
+        else []
+    )
+    report["confounded_with"] = [
+        {"name": n, "share_of_field_beyond_calibration": round(share, 4)} for n, share in found
+    ]
+    if not found:
+        return
+    by_name = {e.name: e for e in att.effects}
+    names = [n for n, _ in found]
+    report["verdict_status"] = (
+        f"{report.get('verdict_status') or 'firm'}; on this span {verdict} cannot be told apart "
+        "from "
+        + ", ".join(
+            f"{n} ({share:.0%} of {verdict}'s field beyond the calibration is {n}'s; held-out "
+            f"{by_name[n].holdout_rms_after_nt / np.sqrt(3.0):.3g} nT against "
+            f"{by_name[verdict].holdout_rms_after_nt / np.sqrt(3.0):.3g} nT)"
+            for n, share in found
+        )
+        + "; what would decide: "
+        + deciders([verdict, *names])
+    )
 
 
 def _mark_withdrawn(report: dict[str, Any], att: Attribution, rv: Review) -> None:
@@ -608,6 +802,15 @@ def _mark_withdrawn(report: dict[str, Any], att: Attribution, rv: Review) -> Non
             "residual is one smooth misfit whose chunks are not independent, and a gain this "
             "small is what bending the calibration's extrapolation does"
         )
+    for name in rv.correlated:
+        e = by_name[name]
+        e["significant"] = False
+        e["status"] = "not significant on correlated chunks"
+        e["correlated_reason"] = (
+            "its held-out gain comes and goes with a slow wander of the residual: counted as "
+            "the independent stretches it spans (the chunks' autocorrelation), it is not "
+            f"significant at {CORRELATED_ALPHA:g}"
+        )
     for name in rv.orphaned:
         e = by_name[name]
         e["significant"] = False
@@ -655,6 +858,7 @@ def _honesty_section(rv: Review) -> dict[str, Any]:
         "orphaned": list(rv.orphaned),
         "overshadowed": list(rv.overshadowed),
         "immaterial": list(rv.immaterial),
+        "correlated": list(rv.correlated),
         "fell_back": rv.fell_back,
         "withdrawn": rv.withdrawn,
         "statement": (

@@ -24,7 +24,7 @@ import numpy as np
 
 from orbitcal.arrays import FloatArray
 
-__all__ = ["signed_rank_greater_p"]
+__all__ = ["signed_rank_greater_p", "signed_rank_z"]
 
 #: Differences up to which the exact distribution is used (scipy's ``method="auto"``).
 EXACT_MAX_N = 50
@@ -101,3 +101,19 @@ def signed_rank_greater_p(d: FloatArray) -> float:
         return float("nan")
     z = (r_plus - mean) / se
     return 0.5 * math.erfc(z / math.sqrt(2.0))
+
+
+def signed_rank_z(d: FloatArray) -> float:
+    """The normal score of the sum of positive ranks of ``d`` (zero differences split, ties
+    corrected), as in the normal approximation of :func:`signed_rank_greater_p` [-]; nan when
+    there is nothing to rank."""
+    d = np.asarray(d, dtype=float).reshape(-1)
+    n = d.size
+    if n == 0:
+        return float("nan")
+    ranks, sizes = _average_ranks(np.abs(d))
+    r_plus = float(np.sum(ranks[d > 0.0])) + float(np.sum(ranks[d == 0.0])) / 2.0
+    var = n * (n + 1.0) * (2.0 * n + 1.0) - float(np.sum(sizes**3 - sizes)) / 2.0
+    if var <= 0.0:
+        return float("nan")
+    return (r_plus - n * (n + 1.0) * 0.25) / math.sqrt(var / 24.0)
