@@ -172,13 +172,22 @@ def gap_section(
         "inseparable": list(inseparable),
     }
     if inseparable:
+        one = len(inseparable) == 1
         gap["inseparable_statement"] = (
             f"the held-out residual ({rms:.3g} nT per component, {times:.1f} x the noise floor) "
             "cannot be separated from the calibration on this span: "
             + ", ".join(inseparable)
-            + f" would each shrink it, but >= {INSEPARABLE_LIMIT:.0%} of each one's fitted field "
-            "is a change of the 12 calibration parameters, so the held-out blocks cannot tell "
-            "which (if any) is present; what would decide: " + deciders(inseparable)
+            + (" would shrink it" if one else " would each shrink it")
+            + f", but >= {INSEPARABLE_LIMIT:.0%} of "
+            + ("its" if one else "each one's")
+            + " fitted field is a change of the 12 calibration parameters, so the held-out blocks "
+            + (
+                "cannot tell whether it is present"
+                if one
+                else "cannot tell which (if any) is present"
+            )
+            + "; what would decide: "
+            + deciders(inseparable)
         )
     if unexplained:
         gap["statement"] = (

@@ -429,4 +429,5 @@ def attribute(
         has_prior=data.calibration_prior is not None,
         span_s=float(data.t_utc_s[-1] - data.t_utc_s[0]),
         dropped=stepwise.dropped,
+        fit_mask=None if fit_mask is None else np.asarray(fit_mask, dtype=bool),
     )

@@ -133,6 +133,8 @@ class Attribution:
         conditional on all the others no longer shrank the held-out residual significantly).
     span_s : float
         Time span of the data [s].
+    fit_mask : ndarray of bool or None
+        The samples every fit was restricted to (None: all), as given to :func:`attribute`.
     """
 
     baseline_rms_nt: float
@@ -152,6 +154,7 @@ class Attribution:
     has_prior: bool = False
     span_s: float = 0.0
     dropped: list[str] = field(default_factory=list)
+    fit_mask: BoolArray | None = None
 
 
 def _params(fit: JointFit, k: int) -> dict[str, Any]:
