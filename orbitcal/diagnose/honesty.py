@@ -809,22 +809,55 @@ def _confounding_words(
     report["confounded_with"] = [
         {"name": n, "share_of_field_beyond_calibration": round(share, 4)} for n, share in found
     ]
-    if not found:
+    unlit = _sun_driven_without_eclipse(data, att, verdict)
+    if unlit:
+        report["confounded_with"].append(
+            {"name": "external_field", "reason": "no eclipse on a span shorter than an orbit"}
+        )
+    if not found and not unlit:
         return
     by_name = {e.name: e for e in att.effects}
     names = [n for n, _ in found]
+    status = report.get("verdict_status") or "firm"
+    if unlit and status == "firm":
+        status = "tentative"
     report["verdict_status"] = (
-        f"{report.get('verdict_status') or 'firm'}; on this span {verdict} cannot be told apart "
-        "from "
-        + ", ".join(
-            f"{n} ({share:.0%} of {verdict}'s field beyond the calibration is {n}'s; held-out "
-            f"{by_name[n].holdout_rms_after_nt / np.sqrt(3.0):.3g} nT against "
-            f"{by_name[verdict].holdout_rms_after_nt / np.sqrt(3.0):.3g} nT)"
-            for n, share in found
+        status
+        + (
+            f"; on this span {verdict} cannot be told apart from "
+            + ", ".join(
+                f"{n} ({share:.0%} of {verdict}'s field beyond the calibration is {n}'s; "
+                f"held-out {by_name[n].holdout_rms_after_nt / np.sqrt(3.0):.3g} nT against "
+                f"{by_name[verdict].holdout_rms_after_nt / np.sqrt(3.0):.3g} nT)"
+                for n, share in found
+            )
+            if found
+            else ""
+        )
+        + (
+            "; the span has no eclipse and is shorter than an orbit: a field that is a linear "
+            "map of the Sun direction is then any field fixed in space (the ring current's, "
+            "external_field, among them), so nothing here says it comes from the Sun"
+            if unlit
+            else ""
         )
         + "; what would decide: "
-        + deciders([verdict, *names])
+        + deciders([verdict, *names, *(["external_field"] if unlit else [])])
     )
+
+
+def _sun_driven_without_eclipse(data: DiagnosisData, att: Attribution, verdict: str) -> bool:
+    """A Sun-driven verdict on a span shorter than an orbit without a sample in eclipse: the
+    Sun direction is fixed in space over it, and the template's one signature of the Sun (on when
+    lit, off in eclipse) is absent from the data."""
+    if verdict != "sun_driven" or att.span_s >= ORBIT_S:
+        return False
+    lit = (
+        np.asarray(data.illumination) > 0.5
+        if data.illumination is not None
+        else (np.asarray(data.sunlit, dtype=bool) if data.sunlit is not None else None)
+    )
+    return lit is not None and bool(np.all(lit))
 
 
 def _mark_withdrawn(report: dict[str, Any], att: Attribution, rv: Review) -> None:
