@@ -33,7 +33,14 @@ against the same held-out data, and says so where a claim does not hold:
 * **Confounded.** A candidate that draws the verdict's own field (beyond the calibration) on this
   span and explains the held-out residual nearly as well is named beside the verdict, with what
   would decide (:func:`confounded_with`): under a spin about one axis a field fixed in space is a
-  Sun-driven field's matrix times the Sun direction.
+  Sun-driven field's matrix times the Sun direction. A Sun-driven verdict on an all-sunlit span
+  shorter than an orbit always names the external field so, and is tentative.
+* **The calibration's own extrapolation.** On a span shorter than an orbit, a gap of which most
+  goes when the 12 parameters are fitted with the held-out blocks too is the calibration's own
+  extrapolation error: the report says it cannot be separated from the calibration on this span
+  (:func:`calibration_extrapolation`, ``gap.calibration_extrapolation``).
+* **Residues on short spans.** There a time offset and a drift of the parameters beside other
+  effects face the residue test too (:data:`SHORT_SPAN_FLEXIBLE`).
 * **Never worse than the baseline.** If the final model's held-out RMS exceeds the calibration's
   alone, the last effects are withdrawn until it does not (falling back to the calibration
   alone), and the report says so (``honesty.fell_back``).
