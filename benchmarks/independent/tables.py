@@ -3,6 +3,7 @@
     python benchmarks/independent/tables.py --real BEFORE.json AFTER.json \
         --worlds LABEL=FILE ... > benchmarks/results/diagnose_independent.md
     python benchmarks/independent/tables.py --real-summary RUN.json ...   # the README's row
+    python benchmarks/independent/tables.py --real-runs LABEL=RUN.json ...  # a row per run
 """
 
 from __future__ import annotations
@@ -131,15 +132,45 @@ def _real_summary(paths: list[Path]) -> list[str]:
     ]
 
 
+def _real_runs(runs: list[tuple[str, dict]]) -> list[str]:
+    """One row per ``real_pass.py`` run: issue 25's criterion by attitude, the strict count."""
+    out = [
+        "| run | commit | seed | criterion, all | tumbling | nadir |"
+        " verdict external_field, nothing else significant | another effect significant |",
+        "|---|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    for label, run in runs:
+        rows = run["rows"]
+
+        def count(att: str | None, key: str = "ok_or_explicit", rows: list[dict] = rows) -> str:
+            sel = [r for r in rows if att is None or r["attitude"] == att]
+            return f"{sum(bool(r.get(key)) for r in sel)} of {len(sel)}"
+
+        seed = run["command"].split("--seed")[-1].split()[0] if "--seed" in run["command"] else "-"
+        extra = sum(not r["only_allowed_significant"] for r in rows)
+        out.append(
+            f"| {label} | {run['commit'] or '-'} | {seed} | {count(None)} | {count('tumbling')} |"
+            f" {count('nadir')} | {count(None, 'ok')} | {extra} |"
+        )
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--real-summary", nargs="+", type=Path, default=[])
     ap.add_argument("--real", nargs=2, type=Path)
     ap.add_argument("--worlds", nargs="*", default=[])
+    ap.add_argument("--real-runs", nargs="*", default=[], help="LABEL=FILE, one row each")
     args = ap.parse_args()
     lines: list[str] = []
     if args.real_summary:
         lines += [*_real_summary(args.real_summary), ""]
+    if args.real_runs:
+        runs_r = []
+        for spec in args.real_runs:
+            label, path = spec.split("=", 1)
+            runs_r.append((label, json.loads(Path(path).read_text())))
+        lines += [*_real_runs(runs_r), ""]
     if args.real:
         b, a = (json.loads(p.read_text()) for p in args.real)
         lines += [*_real(b, a), ""]
