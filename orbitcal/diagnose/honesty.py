@@ -867,26 +867,38 @@ def _sun_driven_without_eclipse(data: DiagnosisData, att: Attribution, verdict: 
     return lit is not None and bool(np.all(lit))
 
 
+def _withdraw(
+    by_name: dict[str, dict[str, Any]],
+    names: Sequence[str],
+    status: str,
+    reason_key: str | None = None,
+    reason: str = "",
+) -> None:
+    """Mark the effects ``names`` of the report not significant, with ``status`` and a reason."""
+    for name in names:
+        e = by_name[name]
+        e["significant"] = False
+        e["status"] = status
+        if reason_key is not None:
+            e[reason_key] = reason
+
+
 def _mark_withdrawn(report: dict[str, Any], att: Attribution, rv: Review) -> None:
     """Each effect the review withdrew: not significant, its status and the reason."""
     by_name = {e["name"]: e for e in report["effects"]}
-    residues = rv.residues
+    residues = [r for r in rv.residues if r["possible_residue"]]
     for r in residues:
-        if not r["possible_residue"]:
-            continue
-        e = by_name[r["effect"]]
-        e["significant"] = False
-        e["status"] = "possible residue"
-        e["residue_reason"] = (
+        _withdraw(
+            by_name,
+            [r["effect"]],
+            "possible residue",
+            "residue_reason",
             "possible residue: beside the other selected effects with a free scale per "
             "axis, a drift of it and a shift in time (their imperfect models), its field "
             f"shrinks the held-out residual by {r['gain']:.1%} (p = {r['p_value']:.2g}): "
-            "what it takes may be what the others' templates miss"
+            "what it takes may be what the others' templates miss",
         )
-    for name in rv.inseparable:
-        e = by_name[name]
-        e["significant"] = False
-        e["status"] = "inseparable"
+    _withdraw(by_name, rv.inseparable, "inseparable")
     for name in inseparable_candidates(att):
         e = by_name[name]
         e["inseparable"] = True
@@ -897,50 +909,50 @@ def _mark_withdrawn(report: dict[str, Any], att: Attribution, rv: Review) -> Non
             "of the 12 parameters, so its held-out gain says how it moves the calibration's "
             "extrapolation, not that it is present"
         )
-    for name in rv.overshadowed:
-        e = by_name[name]
-        e["significant"] = False
-        e["status"] = "overshadowed"
-        e["overshadowed_reason"] = (
-            "a candidate the span cannot tell from the calibration explains the held-out "
-            f"residual more than {OVERSHADOW_RATIO:g} x better than the model with it: its gain "
-            "may be a fragment of the same misfit"
-        )
-    for name in rv.immaterial:
-        e = by_name[name]
-        e["significant"] = False
-        e["status"] = "immaterial"
-        e["immaterial_reason"] = (
-            f"it removes less than {MATERIAL_GAIN:.0%} of a held-out residual more than "
-            f"{LARGE_GAP_TIMES_NOISE:g} x the noise floor: on a span shorter than an orbit that "
-            "residual is one smooth misfit whose chunks are not independent, and a gain this "
-            "small is what bending the calibration's extrapolation does"
-        )
-    for name in rv.correlated:
-        e = by_name[name]
-        e["significant"] = False
-        e["status"] = "not significant on correlated chunks"
-        e["correlated_reason"] = (
-            "its held-out gain comes and goes with a slow wander of the residual: counted as "
-            "the independent stretches it spans (the chunks' autocorrelation), it is not "
-            f"significant at {CORRELATED_ALPHA:g}"
-        )
-    for name in rv.orphaned:
-        e = by_name[name]
-        e["significant"] = False
-        e["status"] = "withdrawn"
-        e["withdrawn_reason"] = (
-            "significant only beside "
-            + ", ".join(rv.inseparable + [r["effect"] for r in residues if r["possible_residue"]])
-            + ": without them it no longer shrinks the held-out residual significantly"
-        )
-    for name in rv.withdrawn:
-        e = by_name[name]
-        e["significant"] = False
-        e["status"] = "withdrawn"
-        e["withdrawn_reason"] = (
-            "the final model with it was worse on the held-out blocks than the calibration alone"
-        )
+    _withdraw(
+        by_name,
+        rv.overshadowed,
+        "overshadowed",
+        "overshadowed_reason",
+        "a candidate the span cannot tell from the calibration explains the held-out "
+        f"residual more than {OVERSHADOW_RATIO:g} x better than the model with it: its gain "
+        "may be a fragment of the same misfit",
+    )
+    _withdraw(
+        by_name,
+        rv.immaterial,
+        "immaterial",
+        "immaterial_reason",
+        f"it removes less than {MATERIAL_GAIN:.0%} of a held-out residual more than "
+        f"{LARGE_GAP_TIMES_NOISE:g} x the noise floor: on a span shorter than an orbit that "
+        "residual is one smooth misfit whose chunks are not independent, and a gain this "
+        "small is what bending the calibration's extrapolation does",
+    )
+    _withdraw(
+        by_name,
+        rv.correlated,
+        "not significant on correlated chunks",
+        "correlated_reason",
+        "its held-out gain comes and goes with a slow wander of the residual: counted as "
+        "the independent stretches it spans (the chunks' autocorrelation), it is not "
+        f"significant at {CORRELATED_ALPHA:g}",
+    )
+    _withdraw(
+        by_name,
+        rv.orphaned,
+        "withdrawn",
+        "withdrawn_reason",
+        "significant only beside "
+        + ", ".join(rv.inseparable + [r["effect"] for r in residues])
+        + ": without them it no longer shrinks the held-out residual significantly",
+    )
+    _withdraw(
+        by_name,
+        rv.withdrawn,
+        "withdrawn",
+        "withdrawn_reason",
+        "the final model with it was worse on the held-out blocks than the calibration alone",
+    )
 
 
 def _final_section(
