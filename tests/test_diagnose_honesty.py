@@ -415,7 +415,8 @@ def test_a_verdict_another_template_draws_on_a_short_span_is_named_with_it() -> 
     from test_diagnose_worlds import make_world
 
     from orbitcal.diagnose import attribute
-    from orbitcal.diagnose.honesty import _fit_names, confounded_with
+    from orbitcal.diagnose.confounding import confounded_with
+    from orbitcal.diagnose.honesty import _fit_names
     from orbitcal.diagnose.options import AttributionOptions
 
     found = {}
@@ -433,13 +434,13 @@ def test_a_sun_driven_verdict_without_an_eclipse_on_a_short_span_is_not_the_suns
     linear map of it is any field fixed in space, and the report names the external field."""
     from types import SimpleNamespace
 
-    from orbitcal.diagnose.honesty import _sun_driven_without_eclipse
+    from orbitcal.diagnose.confounding import sun_driven_without_eclipse
     from orbitcal.diagnose.span_options import ORBIT_S
 
     lit = SimpleNamespace(illumination=np.ones(50), sunlit=None)
     some_eclipse = SimpleNamespace(illumination=np.r_[np.ones(40), np.zeros(10)], sunlit=None)
     short, long = SimpleNamespace(span_s=0.3 * ORBIT_S), SimpleNamespace(span_s=4 * ORBIT_S)
-    assert _sun_driven_without_eclipse(lit, short, "sun_driven")  # type: ignore[arg-type]
-    assert not _sun_driven_without_eclipse(some_eclipse, short, "sun_driven")  # type: ignore[arg-type]
-    assert not _sun_driven_without_eclipse(lit, long, "sun_driven")  # type: ignore[arg-type]
-    assert not _sun_driven_without_eclipse(lit, short, "external_field")  # type: ignore[arg-type]
+    assert sun_driven_without_eclipse(lit, short, "sun_driven")  # type: ignore[arg-type]
+    assert not sun_driven_without_eclipse(some_eclipse, short, "sun_driven")  # type: ignore[arg-type]
+    assert not sun_driven_without_eclipse(lit, long, "sun_driven")  # type: ignore[arg-type]
+    assert not sun_driven_without_eclipse(lit, short, "external_field")  # type: ignore[arg-type]

@@ -32,13 +32,14 @@ against the same held-out data, and says so where a claim does not hold:
   random-walk offset) is not significant; one that holds in every chunk is untouched.
 * **Confounded.** A candidate that draws the verdict's own field (beyond the calibration) on this
   span and explains the held-out residual nearly as well is named beside the verdict, with what
-  would decide (:func:`confounded_with`): under a spin about one axis a field fixed in space is a
-  Sun-driven field's matrix times the Sun direction. A Sun-driven verdict on an all-sunlit span
-  shorter than an orbit always names the external field so, and is tentative.
+  would decide (:mod:`orbitcal.diagnose.confounding`): under a spin about one axis a field fixed
+  in space is a Sun-driven field's matrix times the Sun direction. A Sun-driven verdict on an
+  all-sunlit span shorter than an orbit always names the external field so, and is tentative.
 * **The calibration's own extrapolation.** On a span shorter than an orbit, a gap of which most
   goes when the 12 parameters are fitted with the held-out blocks too is the calibration's own
   extrapolation error: the report says it cannot be separated from the calibration on this span
-  (:func:`calibration_extrapolation`, ``gap.calibration_extrapolation``).
+  (:func:`orbitcal.diagnose.extrapolation.calibration_extrapolation`,
+  ``gap.calibration_extrapolation``).
 * **Residues on short spans.** There a time offset and a drift of the parameters beside other
   effects face the residue test too (:data:`SHORT_SPAN_FLEXIBLE`).
 * **Never worse than the baseline.** If the final model's held-out RMS exceeds the calibration's
@@ -56,7 +57,6 @@ against the same held-out data, and says so where a claim does not hold:
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -65,11 +65,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from orbitcal.arrays import BoolArray, FloatArray
+from orbitcal.diagnose.confounding import confounding_words
 from orbitcal.diagnose.effects import effect_param_range
+from orbitcal.diagnose.extrapolation import extrapolation_words
 from orbitcal.diagnose.gap import (
     GAP_TIMES_NOISE,
     INSEPARABLE_LIMIT,
-    deciders,
     gap_section,
     noise_floor_nt,
     noise_ratio,
@@ -81,7 +82,6 @@ from orbitcal.metrics import norm_rms_nt
 
 if TYPE_CHECKING:  # pragma: no cover
     from orbitcal.diagnose.attribution import Attribution, EffectScore, JointFit
-    from orbitcal.diagnose.design import DesignBlock
     from orbitcal.diagnose.effects import DiagnosisData
 
 __all__ = [
@@ -121,16 +121,6 @@ OVERSHADOW_RATIO = 2.0
 #: :data:`LARGE_GAP_TIMES_NOISE` times the noise floor is immaterial (:func:`_immaterial`).
 MATERIAL_GAIN = 0.10
 LARGE_GAP_TIMES_NOISE = 10.0
-#: A candidate whose design (with the calibration's) reproduces at least this share of the
-#: verdict's fitted field beyond the calibration, and leaves at most :data:`CONFOUND_RATIO` times
-#: the verdict's held-out residual, cannot be told from the verdict on this span
-#: (:func:`confounded_with`).
-CONFOUND_SHARE = 0.9
-CONFOUND_RATIO = 1.5
-#: On a span shorter than an orbit, a held-out residual of which at least this share (of its mean
-#: square) goes when the 12 parameters are fitted with the held-out blocks too is mostly the
-#: calibration's own extrapolation error (:func:`calibration_extrapolation`).
-EXTRAPOLATION_SHARE = 0.5
 #: Chunks of the held-out span and the one-sided level of the correlated-chunk check
 #: (:func:`_correlated`).
 CORRELATED_CHUNKS = 32
@@ -588,78 +578,6 @@ def inseparable_selected(
     return out
 
 
-def _variant_block(
-    data: DiagnosisData, train: BoolArray, name: str, variant: str | None
-) -> DesignBlock | None:
-    """The design of ``name`` in its reported variant (else its first form)."""
-    from orbitcal.diagnose.effects import get_effect
-
-    block = get_effect(name).design(data, train)
-    if block is None:
-        return None
-    for b in (block, *block.alternatives):
-        if variant and b.variant == variant:
-            return b
-    return block
-
-
-def confounded_with(
-    data: DiagnosisData, att: Attribution, verdict: str, fit_names: Sequence[str]
-) -> list[tuple[str, float]]:
-    """Candidates the span cannot tell from the verdict, with the share of the verdict's fitted
-    field beyond the calibration that each reproduces (least squares on the training samples,
-    the 12 parameters and the candidate's design free), best first.
-
-    Under a spin about one axis, a field fixed in space (a ring current) is a Sun-driven field's
-    matrix times the Sun direction, and a time shift is a change of the body rates' projection:
-    two templates can draw the same field on a short span. Such a candidate explains the held-out
-    residual nearly as well (within :data:`CONFOUND_RATIO`) and reproduces at least
-    :data:`CONFOUND_SHARE` of the verdict's own part; the report then names it."""
-    from orbitcal.diagnose.attribution import fit_joint
-
-    fit = att.fits.get("final")
-    by_name = {e.name: e for e in att.effects}
-    if fit is None or verdict not in fit_names or verdict not in by_name:
-        return []
-    f = fit.effect_nt(list(fit_names).index(verdict))
-    a = float(by_name[verdict].absorbed_fraction or 0.0)
-    beyond = (1.0 - a) * float(np.sum(f[att.train] ** 2))
-    if beyond <= 0.0:
-        return []
-    probe = dataclasses.replace(data, b_raw_nt=data.b_ref_body_nt + f)
-    out = []
-    for e in att.effects:
-        if (
-            e.name == verdict
-            or e.name in att.selected
-            or e.name in OWN_TEST
-            or e.holdout_rms_after_nt > CONFOUND_RATIO * by_name[verdict].holdout_rms_after_nt
-        ):
-            continue
-        block = _variant_block(data, att.train, e.name, e.params.get("variant"))
-        if block is None:
-            continue
-        rival = fit_joint(probe, att.train, [block], robust=False, bounded=False, use_prior=False)
-        orth = (probe.b_raw_nt - rival.predict_nt(probe))[att.train]
-        share = 1.0 - float(np.sum(orth**2)) / beyond
-        if share >= CONFOUND_SHARE:
-            out.append((e.name, min(share, 1.0)))
-    return sorted(out, key=lambda x: -x[1])
-
-
-def calibration_extrapolation(data: DiagnosisData, att: Attribution) -> tuple[float, float]:
-    """The held-out RMS [nT] of the calibration alone fitted with the held-out blocks too (the
-    same fit mask), and the share of the baseline's held-out mean square that this removes [-]:
-    how much of the held-out residual is the calibration's own extrapolation error."""
-    from orbitcal.diagnose.attribution import fit_joint
-
-    allowed = att.fit_mask if att.fit_mask is not None else np.ones(data.n, dtype=bool)
-    refit = fit_joint(data, att.train | (att.holdout & allowed))
-    rms = norm_rms_nt((data.b_raw_nt - refit.predict_nt(data))[att.holdout])
-    share = 1.0 - (rms / max(att.baseline_rms_nt, 1e-12)) ** 2
-    return float(rms), float(max(share, 0.0))
-
-
 def _absorbed(att: Attribution) -> list[EffectScore]:
     """The candidates (auroral currents aside) at least :data:`INSEPARABLE_LIMIT` of whose
     fitted field is a change of the 12 parameters on this span (none without a prior)."""
@@ -747,124 +665,19 @@ def review_report(
     absorbed = absorbed_candidates(att)
     report["gap"]["absorbed_by_calibration"] = absorbed
     verdict_status(report, absorbed, OWN_TEST)
-    _extrapolation_words(report, data, att)
-    _confounding_words(report, data, att, rv)
+    extrapolation_words(report, data, att, own_test=OWN_TEST)
+    confounding_words(
+        report,
+        data,
+        att,
+        _fit_names(att),
+        verdict_stands=report["verdict"] in att.selected
+        and bool(rv.keep)
+        and rv.keep[0] == report["verdict"],
+        own_test=OWN_TEST,
+    )
     report["honesty"] = _honesty_section(rv)
     return report
-
-
-def _extrapolation_words(report: dict[str, Any], data: DiagnosisData, att: Attribution) -> None:
-    """On a span shorter than an orbit, a verdict of none (or of the auroral currents alone)
-    beside an unexplained gap that the calibration's own extrapolation error mostly makes
-    (:func:`calibration_extrapolation`, :data:`EXTRAPOLATION_SHARE`): the gap cannot be separated
-    from the calibration on this span, and the status says so, with the closest candidates."""
-    gap = report["gap"]
-    if (
-        att.span_s >= ORBIT_S
-        or att.has_prior
-        or not gap["unexplained"]
-        or gap["inseparable"]
-        or report["verdict"] not in ("none", *OWN_TEST)
-    ):
-        return
-    rms_refit, share = calibration_extrapolation(data, att)
-    gap["calibration_extrapolation"] = {
-        "holdout_rms_refit_nt": round(rms_refit / np.sqrt(3.0), 4),
-        "share_of_holdout_mean_square": round(share, 4),
-        "refit": "the 12 parameters alone, fitted with the held-out blocks too",
-    }
-    if share < EXTRAPOLATION_SHARE:
-        return
-    closest = gap["closest_candidates"]
-    statement = (
-        f"the held-out residual ({gap['holdout_rms_nt']:.3g} nT per component, "
-        f"{gap['times_noise']:.1f} x the noise floor) cannot be separated from the calibration on "
-        f"this span: {share:.0%} of its mean square is the calibration's own extrapolation error "
-        "(fitted with the held-out blocks too, the 12 parameters alone leave "
-        f"{rms_refit / np.sqrt(3.0):.3g} nT there), so no candidate's held-out gain can be told "
-        "from a change of the calibration"
-        + (
-            "; closest: "
-            + "; ".join(f"{c['name']} ({str(c['refused_because']).split(':')[0]})" for c in closest)
-            if closest
-            else ""
-        )
-        + "; what would decide: "
-        + deciders([c["name"] for c in closest])
-    )
-    gap["extrapolation_statement"] = statement
-    report["verdict_confidence"] = None
-    if report["verdict"] == "none":
-        report["verdict_status"] = "none: " + statement
-    else:
-        report["verdict_status"] = (
-            f"{report['verdict']} on their own latitudes; beside them, " + statement
-        )
-
-
-def _confounding_words(
-    report: dict[str, Any], data: DiagnosisData, att: Attribution, rv: Review
-) -> None:
-    """``confounded_with`` and the verdict status's words for candidates the span cannot tell
-    from the verdict (:func:`confounded_with`)."""
-    verdict = report["verdict"]
-    found = (
-        confounded_with(data, att, verdict, _fit_names(att))
-        if verdict in att.selected and rv.keep and rv.keep[0] == verdict
-        else []
-    )
-    report["confounded_with"] = [
-        {"name": n, "share_of_field_beyond_calibration": round(share, 4)} for n, share in found
-    ]
-    unlit = _sun_driven_without_eclipse(data, att, verdict)
-    if unlit:
-        report["confounded_with"].append(
-            {"name": "external_field", "reason": "no eclipse on a span shorter than an orbit"}
-        )
-    if not found and not unlit:
-        return
-    by_name = {e.name: e for e in att.effects}
-    names = [n for n, _ in found]
-    status = report.get("verdict_status") or "firm"
-    if unlit and status == "firm":
-        status = "tentative"
-    report["verdict_status"] = (
-        status
-        + (
-            f"; on this span {verdict} cannot be told apart from "
-            + ", ".join(
-                f"{n} ({share:.0%} of {verdict}'s field beyond the calibration is {n}'s; "
-                f"held-out {by_name[n].holdout_rms_after_nt / np.sqrt(3.0):.3g} nT against "
-                f"{by_name[verdict].holdout_rms_after_nt / np.sqrt(3.0):.3g} nT)"
-                for n, share in found
-            )
-            if found
-            else ""
-        )
-        + (
-            "; the span has no eclipse and is shorter than an orbit: a field that is a linear "
-            "map of the Sun direction is then any field fixed in space (the ring current's, "
-            "external_field, among them), so nothing here says it comes from the Sun"
-            if unlit
-            else ""
-        )
-        + "; what would decide: "
-        + deciders([verdict, *names, *(["external_field"] if unlit else [])])
-    )
-
-
-def _sun_driven_without_eclipse(data: DiagnosisData, att: Attribution, verdict: str) -> bool:
-    """A Sun-driven verdict on a span shorter than an orbit without a sample in eclipse: the
-    Sun direction is fixed in space over it, and the template's one signature of the Sun (on when
-    lit, off in eclipse) is absent from the data."""
-    if verdict != "sun_driven" or att.span_s >= ORBIT_S:
-        return False
-    lit = (
-        np.asarray(data.illumination) > 0.5
-        if data.illumination is not None
-        else (np.asarray(data.sunlit, dtype=bool) if data.sunlit is not None else None)
-    )
-    return lit is not None and bool(np.all(lit))
 
 
 def _withdraw(
