@@ -94,6 +94,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--attitudes", nargs="+", default=["tumbling", "nadir"])
     ap.add_argument("--keep", type=Path, default=None, help="keep each table and report here")
+    ap.add_argument("--only", type=int, nargs="+", default=None, help="run only these draws")
     args = ap.parse_args()
     t, r, b_itrs = load_pass()
     rows = []
@@ -103,6 +104,8 @@ def main() -> None:
         tmp.mkdir(parents=True, exist_ok=True)
         for attitude in args.attitudes:
             for k in range(args.draws):
+                if args.only is not None and k not in args.only:
+                    continue
                 rng = np.random.default_rng([args.seed, k, attitude == "nadir"])
                 sensor = draw_sensor(rng)
                 if attitude == "tumbling":

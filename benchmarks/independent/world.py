@@ -12,8 +12,9 @@ Effects have their own shapes, from the physics rather than from the diagnosis's
 * ``magnetorquer``: B-dot-like commands (sign of the field rate, saturating, duty-cycled off
   half of each 20 s period) coupled into the sensor by a random 3x3 matrix.
 * ``time_offset``: the sensor samples the field at ``t + dt``.
-* ``external_field``: a ring current along the dipole axis from a Dst-like series (main phase
-  and recovery), uniform over the orbit, with a 20 % induced part.
+* ``external_field``: a ring current along the dipole axis from a Dst series of Burton's equation
+  (an injection for the main phase, then recovery), uniform over the orbit, with a 20 % induced
+  part.
 * ``field_aligned_currents``: sheets of current at the auroral ovals (|mlat| 62-72 deg), a
   tanh-shaped step of the east component (perpendicular to B), different strength per crossing.
 * ``attitude_error``: small rotations (twice-per-orbit thermal flex plus a random walk).
@@ -304,15 +305,22 @@ def make_world(
         tau_h = (t - t[0]) / 3600.0
         peak = rng.uniform(-150.0, -40.0)
         onset = rng.uniform(0.0, 3.0)
+        tau_rec = rng.uniform(4, 12)
+        # Burton et al. (1975): dDst/dt = Q - Dst / tau, with a constant injection Q for the
+        # ``onset`` hours of the main phase (chosen so that Dst reaches ``peak``), none after.
+        # (Until 2026-11-26 the main phase rose linearly to 0.3 x the peak and the remaining
+        # 0.7 x came in one sample: a step of 30-105 nT in 10 s that no ring current makes.)
+        main = 1.0 - np.exp(-np.minimum(tau_h, onset) / tau_rec)
         dst = np.where(
             tau_h < onset,
-            0.3 * peak * tau_h / max(onset, 1e-3),
-            peak * np.exp(-(tau_h - onset) / rng.uniform(4, 12)),
+            peak * main / max(1.0 - np.exp(-onset / tau_rec), 1e-9),
+            peak * np.exp(-(tau_h - onset) / tau_rec),
         )
         # The ring current's field at the Earth is along the dipole moment (southward) when
         # Dst < 0; 1.2: a fifth more from the currents it induces in the Earth.
         b_itrs = b_itrs + (-1.2 * dst)[:, None] * axis[None, :]
         truth["dst_peak_nt"] = float(peak)
+        truth["storm_onset_h"] = float(onset)
     if "field_aligned_currents" in effects or small_unmodelled:
         amp = (
             rng.uniform(80.0, 250.0)
