@@ -80,9 +80,9 @@ def test_november_2026_world_end_to_end(
     assert rc["coverage_end"] == "2026-05-08T09:29:59Z"
     assert rc["used"] is False
     # Without the RC index the external field is estimated from the data alone: the dipole-axis
-    # field with a linear trend or with a recovery-phase decay (chosen by training BIC), never a
-    # variant driven by the RC index or the RC model.
-    data_only = ("dipole_axis", "recovery_")
+    # field with a linear trend, a recovery-phase decay or a storm's main phase and recovery
+    # (chosen by training BIC), never a variant driven by the RC index or the RC model.
+    data_only = ("dipole_axis", "recovery_", "storm@")
     assert rc["external_field_variant"].startswith(data_only)
     assert rc["external_field_variant"].endswith(
         "(estimated from the data; no RC index for these dates)"

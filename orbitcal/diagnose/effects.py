@@ -319,7 +319,8 @@ CATALOGUE: tuple[Effect, ...] = (
     Effect(
         "external_field",
         "uniform magnetospheric field along the dipole (SM z) axis: ring current, "
-        "constant plus RC-index-driven (or a per-window trend when no index covers the data)",
+        "constant plus RC-index-driven (or, when no index covers the data, a trend, a recovery or "
+        "a storm's main phase and recovery)",
         "residual along the dipole axis, same sign at all latitudes; follows the RC/Dst index",
         _design_external,
         param_ranges=(
@@ -333,6 +334,24 @@ CATALOGUE: tuple[Effect, ...] = (
             (
                 "uniform_trend_nt_per_day",
                 symmetric(7200.0, "ring-current rate of change <= 300 nT/h (extreme storms)"),
+            ),
+            (
+                "storm_quiet_level_nt",
+                ParamRange(
+                    -200.0,
+                    200.0,
+                    "quiet-time magnetospheric field along the dipole beside a storm, near 0",
+                    0.0,
+                    30.0,
+                ),
+            ),
+            (
+                "storm_main_phase_nt_per_h",
+                symmetric(300.0, "ring-current rate of change <= 300 nT/h (extreme storms)"),
+            ),
+            (
+                "storm_recovering_nt",
+                symmetric(2000.0, "storm-time ring-current field at its minimum: |Dst| <= 1760 nT"),
             ),
             (
                 "uniform_recovering_nt",

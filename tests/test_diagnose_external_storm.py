@@ -1,0 +1,86 @@
+"""The external field of a storm with a main phase and a recovery (Burton et al. 1975).
+
+A ring current that builds up for hours and then recovers is a V in time that neither a linear
+trend nor an exponential decay from the start of the data draws; under a nadir attitude the
+calibration takes up its constant part and only that change in time shows. Before the storm
+variants the diagnosis named nothing, or a Sun-driven field, on every world below (18 of 18;
+issue 25: the independent generator's storms were missed in 10 of 14 worlds).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from test_diagnose_worlds import make_world
+
+from orbitcal.diagnose.api import diagnose_data
+from orbitcal.diagnose.data import DiagnosisData
+from orbitcal.diagnose.design import (
+    STORM_MIN_SPAN_S,
+    _design_external,
+    _main_phase_h,
+    _recovery_from,
+)
+from orbitcal.geomag import dipole_axis_itrs
+
+
+def _with_storm(
+    attitude: str, seed: int, peak_nt: float, minimum_h: float, recovery_h: float = 6.0
+) -> DiagnosisData:
+    """A world of :func:`make_world` with a storm of its own shape (linear main phase to the
+    minimum, exponential recovery of ``recovery_h``), no RC index."""
+    d = make_world("none", attitude=attitude, seed=seed).data
+    t_h = (d.t_utc_s - d.t_utc_s[0]) / 3600.0
+    dst = np.where(
+        t_h < minimum_h,
+        peak_nt * t_h / minimum_h,
+        peak_nt * np.exp(-(t_h - minimum_h) / recovery_h),
+    )
+    axis_body = np.einsum("nij,j->ni", d.rot_itrs_to_body, dipole_axis_itrs())
+    return dataclasses.replace(d, b_raw_nt=d.b_raw_nt - dst[:, None] * axis_body, rc_index_nt=None)
+
+
+def test_storm_columns_are_continuous_at_the_minimum() -> None:
+    t = np.arange(0.0, 20000.0, 10.0)
+    tm = 7200.0
+    idx = np.arange(t.size)
+    main, rec = _main_phase_h(t, tm, idx), _recovery_from(t, tm, 7.7, idx)
+    assert np.all(main[t >= tm] == 0.0) and np.allclose(main[t < tm], (t[t < tm] - tm) / 3600)
+    assert np.all(rec[t <= tm] == 1.0)
+    after = t > tm
+    assert np.allclose(rec[after], np.exp(-(t[after] - tm) / (7.7 * 3600.0)))
+
+
+def test_storm_variants_only_over_two_orbits_of_training() -> None:
+    d = make_world("none", seed=1).data
+    train = np.ones(d.n, dtype=bool)
+    variants = [b.variant for b in (lambda b: (b, *b.alternatives))(_design_external(d, train))]
+    assert sum(v.startswith("storm@") for v in variants) == 9
+    short = d.t_utc_s - d.t_utc_s[0] < 0.9 * STORM_MIN_SPAN_S
+    variants = [b.variant for b in (lambda b: (b, *b.alternatives))(_design_external(d, short))]
+    assert not any(v.startswith("storm@") for v in variants)
+
+
+def test_a_storm_with_a_main_phase_is_named() -> None:
+    """18 worlds: minimum at 1, 2 or 3 h of 6.3, recovery of 6 h (the template's grid has 4,
+    7.7 and 15 h), three seeds, nadir and tumbling. At 16f6f12 (no storm variants) none of the
+    18 named the external field: 7 named nothing, 7 a Sun-driven field, 3 an orbit error, 1 a
+    crust beside a magnetorquer."""
+    others = []
+    for attitude in ("nadir", "tumbling"):
+        for seed in (3, 4, 5):
+            for minimum_h in (1.0, 2.0, 3.0):
+                data = _with_storm(attitude, seed, -90.0, minimum_h)
+                report = diagnose_data(data, rng=np.random.default_rng(0)).report.to_json()
+                assert report["verdict"] == "external_field"
+                ext = next(e for e in report["effects"] if e["name"] == "external_field")
+                assert ext["significant"] and ext["params"]["variant"].startswith("storm@")
+                # the gap closes to the noise (2 nT per component) once the storm is modelled
+                assert report["final"]["holdout_rms_nt"] < 2.6
+                assert report["baseline"]["holdout_rms_nt"] > 8.0
+                significant = {e["name"] for e in report["effects"] if e["significant"]}
+                others += sorted(significant - {"external_field"})
+    # what the template's recovery time misses is taken up by another effect in one world of
+    # 18 (a magnetorquer: nadir, seed 5, minimum at 3 h)
+    assert len(others) <= 1, others
