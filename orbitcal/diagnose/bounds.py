@@ -87,6 +87,30 @@ def match_prefix(ranges: PrefixRanges, name: str) -> ParamRange:
     return FREE
 
 
+#: The steepest main phase of a storm [nT/h] (extreme storms: a few hundred nT/h).
+STORM_MAIN_PHASE_MAX_NT_PER_H = 300.0
+
+
+def storm_consistency(names: list[str], values: list[float], sds: list[float]) -> list[str]:
+    """Why an external field's storm variant contradicts itself (empty when it does not): a
+    main phase at its bound, the steepest an extreme storm has, is a ramp drawing something
+    other than a ring current (the auroral currents' crossings of a short main phase: an
+    independent world lost its external field to a storm variant at 637 nT/h). Bounded fits
+    clip it, so the bound itself is the sign (the ``external_field`` effect's ``consistency``).
+    """
+    del sds
+    if "storm_main_phase_nt_per_h" not in names:
+        return []
+    rate = values[names.index("storm_main_phase_nt_per_h")]
+    if abs(rate) >= (1.0 - 1e-6) * STORM_MAIN_PHASE_MAX_NT_PER_H:
+        return [
+            f"storm_main_phase_nt_per_h = {rate:.4g} at its bound "
+            f"(+-{STORM_MAIN_PHASE_MAX_NT_PER_H:g} nT/h): the steepest main phase of an extreme "
+            "storm, not this world's"
+        ]
+    return []
+
+
 def time_shift_consistency(names: list[str], values: list[float], sds: list[float]) -> list[str]:
     """Why a time offset's parameters contradict each other (empty when they do not).
 

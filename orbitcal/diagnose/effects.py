@@ -33,9 +33,11 @@ from orbitcal.arrays import BoolArray, FloatArray
 from orbitcal.diagnose.attitude_scan import design_attitude
 from orbitcal.diagnose.bounds import (
     FREE,
+    STORM_MAIN_PHASE_MAX_NT_PER_H,
     ParamRange,
     PrefixRanges,
     match_prefix,
+    storm_consistency,
     symmetric,
     time_shift_consistency,
 )
@@ -347,7 +349,10 @@ CATALOGUE: tuple[Effect, ...] = (
             ),
             (
                 "storm_main_phase_nt_per_h",
-                symmetric(300.0, "ring-current rate of change <= 300 nT/h (extreme storms)"),
+                symmetric(
+                    STORM_MAIN_PHASE_MAX_NT_PER_H,
+                    "ring-current rate of change <= 300 nT/h (extreme storms)",
+                ),
             ),
             (
                 "storm_recovering_nt",
@@ -368,6 +373,7 @@ CATALOGUE: tuple[Effect, ...] = (
                 ParamRange(0.2, 3.0, "RC-driven model amplitude, positive, near 1", 1.0, 0.5),
             ),
         ),
+        consistency=storm_consistency,
     ),
     Effect(
         "crustal_field",
