@@ -60,6 +60,15 @@ class DesignBlock:
     effect : str
         The catalogue effect the block belongs to ("" for none), which the joint fit asks for
         the ranges of its parameters; set by ``Effect.design``.
+    searched : int
+        Parameters of the form chosen by search rather than fitted (a storm's minimum time and
+        recovery time), counted with the names in the BIC of the choice among alternatives.
+    indexed : bool
+        The form is driven by a measured index (the RC index, an RC-driven model).
+    unless_indexed : bool
+        The form is tried only when no ``indexed`` alternative beats the first form on training
+        BIC (by :data:`~orbitcal.diagnose.attribution.joint_fit.INDEX_TRACKS_BIC`): a storm's
+        shape drawn from the data where the index does not follow the field.
     """
 
     source: FloatArray | Columns
@@ -68,6 +77,9 @@ class DesignBlock:
     alternatives: Sequence[DesignBlock] = ()
     refine: Callable[[], Sequence[DesignBlock]] | None = field(default=None, compare=False)
     effect: str = field(default="", compare=False)
+    searched: int = field(default=0, compare=False)
+    indexed: bool = field(default=False, compare=False)
+    unless_indexed: bool = field(default=False, compare=False)
 
     @property
     def n(self) -> int:
@@ -246,7 +258,6 @@ def _design_external(data: DiagnosisData, train: BoolArray) -> DesignBlock | Non
                 variant=f"recovery_{tau_h:.3g}h",
             )
         )
-    options += _storm_variants(data, train, axis)
     rc = data.rc_index_nt
     if rc is not None and _varies(rc[train], tol=1.0):
         options.append(
@@ -254,6 +265,7 @@ def _design_external(data: DiagnosisData, train: BoolArray) -> DesignBlock | Non
                 ScaledVectorColumns(data.n, [axis, axis], [None, rc - float(np.mean(rc[train]))]),
                 ["uniform_along_dipole_nt", "rc_coefficient"],
                 variant="rc_index",
+                indexed=True,
             )
         )
     if data.b_ext_body_nt is not None and _varies(data.b_ext_body_nt[train, 0], tol=1e-3):
@@ -262,6 +274,7 @@ def _design_external(data: DiagnosisData, train: BoolArray) -> DesignBlock | Non
                 ScaledVectorColumns(data.n, [axis, data.b_ext_body_nt], [None, None]),
                 ["uniform_along_dipole_nt", "rc_model_scale"],
                 variant="rc_model",
+                indexed=True,
             )
         )
         # The RC index is hourly: a storm's ring current also changes within the hour.
@@ -270,8 +283,11 @@ def _design_external(data: DiagnosisData, train: BoolArray) -> DesignBlock | Non
                 ScaledVectorColumns(data.n, [axis, data.b_ext_body_nt, axis], [None, None, tau]),
                 ["uniform_along_dipole_nt", "rc_model_scale", "uniform_trend_nt_per_day"],
                 variant="rc_model+trend",
+                indexed=True,
             )
         )
+    # Last: tried only when no index-driven form above follows the field (``unless_indexed``).
+    options += _storm_variants(data, train, axis)
     first = options[0]
     return DesignBlock(first.source, first.names, first.variant, tuple(options[1:]))
 
@@ -324,6 +340,8 @@ def _storm_at(
         ["storm_quiet_level_nt", "storm_main_phase_nt_per_h", "storm_recovering_nt"],
         variant=f"storm@{tm:.0f}_recovery_{tau_h:.3g}h",
         refine=refine,
+        searched=2,
+        unless_indexed=True,
     )
 
 

@@ -94,6 +94,8 @@ def refusal(e: dict[str, Any]) -> str:
         return f"not significant on correlated chunks: {e.get('correlated_reason')}"
     if e.get("status") == "immaterial":
         return f"immaterial: {e.get('immaterial_reason')}"
+    if e.get("status") == "weak":
+        return f"weak: {e.get('weak_reason')}"
     if e.get("status") == "possible residue":
         return str(e.get("residue_reason"))
     absorbed = e.get("absorbed_by_calibration_fraction")
