@@ -4,6 +4,7 @@
         --worlds LABEL=FILE ... > benchmarks/results/diagnose_independent.md
     python benchmarks/independent/tables.py --real-summary RUN.json ...   # the README's row
     python benchmarks/independent/tables.py --real-runs LABEL=RUN.json ...  # a row per run
+    python benchmarks/independent/tables.py --pooled LABEL=A.json,B.json ...  # worlds pooled
 """
 
 from __future__ import annotations
@@ -155,12 +156,46 @@ def _real_runs(runs: list[tuple[str, dict]]) -> list[str]:
     return out
 
 
+def _pooled(specs: list[str]) -> list[str]:
+    """One row per ``LABEL=FILE,FILE,...``: recall, worlds with a spurious effect, verdict among
+    the injected and null false alarms over the worlds of all the files (the README's row)."""
+    out = [
+        "| | recall | worlds with a spurious effect | verdict among injected | null false alarms |",
+        "|---|---:|---:|---:|---:|",
+    ]
+    for spec in specs:
+        label, paths = spec.split("=", 1)
+        rows = [
+            r
+            for p in paths.split(",")
+            for r in json.loads(Path(p).read_text())["rows"]
+            if "error" not in r
+        ]
+        comp = [r for r in rows if r["injected"]]
+        null = [r for r in rows if not r["injected"]]
+        inj = sum(len(r["injected"]) for r in comp)
+        found = sum(len(set(r["injected"]) & set(r["significant"])) for r in comp)
+        spur = sum(bool(r["spurious"]) for r in comp)
+        hit = sum(bool(r["verdict_ok"]) for r in comp)
+        alarms = sum(bool(r["significant"]) for r in null)
+
+        def share(k: int, n: int) -> str:
+            return f"{k} of {n} = {100.0 * k / max(n, 1):.1f} %"
+
+        out.append(
+            f"| {label} | {share(found, inj)} | {share(spur, len(comp))} | "
+            f"{share(hit, len(comp))} | {share(alarms, len(null))} |"
+        )
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--real-summary", nargs="+", type=Path, default=[])
     ap.add_argument("--real", nargs=2, type=Path)
     ap.add_argument("--worlds", nargs="*", default=[])
     ap.add_argument("--real-runs", nargs="*", default=[], help="LABEL=FILE, one row each")
+    ap.add_argument("--pooled", nargs="*", default=[], help="LABEL=FILE,FILE: worlds pooled")
     args = ap.parse_args()
     lines: list[str] = []
     if args.real_summary:
@@ -174,6 +209,8 @@ def main() -> None:
     if args.real:
         b, a = (json.loads(p.read_text()) for p in args.real)
         lines += [*_real(b, a), ""]
+    if args.pooled:
+        lines += [*_pooled(args.pooled), ""]
     if args.worlds:
         runs = []
         for spec in args.worlds:
