@@ -158,33 +158,29 @@ def _real_runs(runs: list[tuple[str, dict]]) -> list[str]:
 
 def _pooled(specs: list[str]) -> list[str]:
     """One row per ``LABEL=FILE,FILE,...``: recall, worlds with a spurious effect, verdict among
-    the injected and null false alarms over the worlds of all the files (the README's row)."""
+    the injected and null false alarms over the worlds of all the files, as ``run_worlds.py``'s
+    :func:`summarise` counts them (the README's row)."""
+    from run_worlds import summarise
+
     out = [
         "| | recall | worlds with a spurious effect | verdict among injected | null false alarms |",
         "|---|---:|---:|---:|---:|",
     ]
     for spec in specs:
         label, paths = spec.split("=", 1)
-        rows = [
-            r
-            for p in paths.split(",")
-            for r in json.loads(Path(p).read_text())["rows"]
-            if "error" not in r
-        ]
-        comp = [r for r in rows if r["injected"]]
-        null = [r for r in rows if not r["injected"]]
-        inj = sum(len(r["injected"]) for r in comp)
-        found = sum(len(set(r["injected"]) & set(r["significant"])) for r in comp)
-        spur = sum(bool(r["spurious"]) for r in comp)
-        hit = sum(bool(r["verdict_ok"]) for r in comp)
-        alarms = sum(bool(r["significant"]) for r in null)
+        rows = [r for p in paths.split(",") for r in json.loads(Path(p).read_text())["rows"]]
+        s = summarise(rows)
+        n_comp, n_null = s["compound_worlds"], s["null_worlds"]
+        n_inj = sum(len(r["injected"]) for r in rows if r["injected"] and "error" not in r)
 
-        def share(k: int, n: int) -> str:
+        def share(rate: float | None, n: int) -> str:
+            k = round((rate or 0.0) * n)
             return f"{k} of {n} = {100.0 * k / max(n, 1):.1f} %"
 
         out.append(
-            f"| {label} | {share(found, inj)} | {share(spur, len(comp))} | "
-            f"{share(hit, len(comp))} | {share(alarms, len(null))} |"
+            f"| {label} | {share(s['recall'], n_inj)} | {share(s['worlds_with_spurious'], n_comp)}"
+            f" | {share(s['verdict_among_injected'], n_comp)} |"
+            f" {share(s['null_false_alarm_rate'], n_null)} |"
         )
     return out
 

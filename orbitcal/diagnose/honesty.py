@@ -416,7 +416,8 @@ def review(data: DiagnosisData, att: Attribution) -> Review:
     weak = _weak_currents(data, att, keep)
     if weak:
         keep = [n for n in keep if n not in weak]
-        final = _refit(data, att, fit_names, keep)
+        if any(n in fit_names for n in weak):  # judged regionally, they have no block to drop
+            final = _refit(data, att, fit_names, keep)
     fell_back = False
     withdrawn: list[str] = []
     while final.rms_nt > att.baseline_rms_nt and keep and fit_names:
