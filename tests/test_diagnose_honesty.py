@@ -13,6 +13,7 @@ import pytest
 
 from orbitcal.diagnose.attribution import Attribution, JointFit, fit_joint, time_blocks
 from orbitcal.diagnose.effects import DesignBlock, DiagnosisData, get_effect
+from orbitcal.diagnose.gap import _lies
 from orbitcal.diagnose.honesty import (
     GAP_TIMES_NOISE,
     _bound_limited,
@@ -444,3 +445,18 @@ def test_a_sun_driven_verdict_without_an_eclipse_on_a_short_span_is_not_the_suns
     assert not sun_driven_without_eclipse(some_eclipse, short, "sun_driven")  # type: ignore[arg-type]
     assert not sun_driven_without_eclipse(lit, long, "sun_driven")  # type: ignore[arg-type]
     assert not sun_driven_without_eclipse(lit, short, "external_field")  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("concentration", "clause"),
+    [
+        ("everywhere", "; it is spread over all latitudes, in sunlight and in eclipse"),
+        ("sunlit", "; it lies mostly in sunlight"),
+        ("eclipse", "; it lies mostly in eclipse"),
+        ("|mlat| 60-70 deg", "; it lies mostly at |mlat| 60-70 deg"),
+        (None, ""),
+    ],
+)
+def test_where_the_gap_lies_reads_as_a_sentence(concentration: str | None, clause: str) -> None:
+    """The statement once read "it lies mostly at everywhere" (independent seed 9700 world 13)."""
+    assert _lies(concentration) == clause

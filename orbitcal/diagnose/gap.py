@@ -96,6 +96,8 @@ def refusal(e: dict[str, Any]) -> str:
         return f"immaterial: {e.get('immaterial_reason')}"
     if e.get("status") == "weak":
         return f"weak: {e.get('weak_reason')}"
+    if e.get("status") == "wander":
+        return f"within the noise's wander: {e.get('wander_reason')}"
     if e.get("status") == "possible residue":
         return str(e.get("residue_reason"))
     absorbed = e.get("absorbed_by_calibration_fraction")
@@ -195,11 +197,7 @@ def gap_section(
         gap["statement"] = (
             f"an unexplained gap: the held-out residual is {rms:.3g} nT per component, "
             f"{times:.1f} x the noise floor ({sigma:.3g} nT); no candidate explains it"
-            + (
-                f"; it lies mostly at {where['concentration']}"
-                if where.get("concentration")
-                else ""
-            )
+            + _lies(where.get("concentration"))
         )
     else:
         gap["statement"] = (
@@ -266,3 +264,16 @@ def verdict_status(
             f"parameters); what would separate it: {separation[verdict]['would_separate']}"
         )
         report["verdict_confidence_of"] = "presence"
+
+
+def _lies(concentration: object) -> str:
+    """Where the gap lies, as a clause of the statement ("" when not known)."""
+    if not concentration:
+        return ""
+    if concentration == "everywhere":
+        return "; it is spread over all latitudes, in sunlight and in eclipse"
+    if concentration == "sunlit":
+        return "; it lies mostly in sunlight"
+    if concentration == "eclipse":
+        return "; it lies mostly in eclipse"
+    return f"; it lies mostly at {concentration}"
