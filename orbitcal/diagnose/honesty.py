@@ -40,6 +40,10 @@ against the same held-out data, and says so where a claim does not hold:
   extrapolation error: the report says it cannot be separated from the calibration on this span
   (:func:`orbitcal.diagnose.extrapolation.calibration_extrapolation`,
   ``gap.calibration_extrapolation``).
+* **Within the noise's wander.** Over spans of two orbits or more, an effect whose fitted field
+  is less than a few times the slow wander (half-hour averages) that the final model leaves on the
+  training samples is what a random-walk or 1/f offset draws, and is withdrawn
+  (:mod:`orbitcal.diagnose.wander`, ``status: "wander"``).
 * **Residues on short spans.** There a time offset and a drift of the parameters beside other
   effects face the residue test too (:data:`SHORT_SPAN_FLEXIBLE`).
 * **Never worse than the baseline.** If the final model's held-out RMS exceeds the calibration's
@@ -78,6 +82,7 @@ from orbitcal.diagnose.gap import (
 )
 from orbitcal.diagnose.signed_rank import signed_rank_greater_p
 from orbitcal.diagnose.span_options import ORBIT_S
+from orbitcal.diagnose.wander import wander_reason
 from orbitcal.metrics import norm_rms_nt
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -349,6 +354,7 @@ class Review:
     immaterial: list[str] = field(default_factory=list)
     correlated: list[str] = field(default_factory=list)
     weak: list[str] = field(default_factory=list)
+    wander: dict[str, tuple[float, float]] = field(default_factory=dict)
     gap_unexplained: bool = False
     verdict: str = "none"
 
@@ -413,6 +419,10 @@ def review(data: DiagnosisData, att: Attribution) -> Review:
     if correlated:
         keep = [n for n in keep if n not in correlated]
         final = _refit(data, att, fit_names, keep)
+    wander = _wander(data, att, fit_names, keep, final)
+    if wander:
+        keep = [n for n in keep if n not in wander]
+        final = _refit(data, att, fit_names, keep)
     weak = _weak_currents(data, att, keep)
     if weak:
         keep = [n for n in keep if n not in weak]
@@ -444,6 +454,7 @@ def review(data: DiagnosisData, att: Attribution) -> Review:
         immaterial=immaterial,
         correlated=correlated,
         weak=weak,
+        wander=wander,
         gap_unexplained=unexplained,
         verdict=_verdict(keep),
     )
@@ -539,6 +550,31 @@ def _correlated(
         if np.isfinite(p) and p >= CORRELATED_ALPHA:
             out.append(name)
     return out
+
+
+def _wander(
+    data: DiagnosisData,
+    att: Attribution,
+    fit_names: Sequence[str],
+    keep: Sequence[str],
+    final: _Final,
+) -> dict[str, tuple[float, float]]:
+    """The kept effects with a field in the final fit that are within the slow wander of the
+    noise (:func:`orbitcal.diagnose.wander.within_wander`), judged on the training samples the
+    fits used (quiet latitudes beside auroral currents, which no block models there)."""
+    from orbitcal.diagnose.design import QUIET_MLAT_DEG
+    from orbitcal.diagnose.wander import within_wander
+
+    if not fit_names or final.fit is None:
+        return {}
+    names = [n for n in fit_names if n in keep]  # the blocks of ``final.fit``, in order
+    fields = {n: final.fit.effect_nt(k) for k, n in enumerate(names) if n not in OWN_TEST}
+    samples = att.train.copy()
+    if att.fit_mask is not None:
+        samples &= att.fit_mask
+    if "field_aligned_currents" in att.selected:
+        samples &= np.abs(data.mlat_deg) < QUIET_MLAT_DEG
+    return within_wander(data.t_utc_s, final.residual_nt, fields, samples, att.span_s)
 
 
 def _weak_currents(data: DiagnosisData, att: Attribution, keep: Sequence[str]) -> list[str]:
@@ -787,6 +823,8 @@ def _mark_withdrawn(report: dict[str, Any], att: Attribution, rv: Review) -> Non
         "the independent stretches it spans (the chunks' autocorrelation), it is not "
         f"significant at {CORRELATED_ALPHA:g}",
     )
+    for name, (variation, wander) in rv.wander.items():
+        _withdraw(by_name, [name], "wander", "wander_reason", wander_reason(variation, wander))
     _withdraw(
         by_name,
         rv.weak,
@@ -846,6 +884,7 @@ def _honesty_section(rv: Review) -> dict[str, Any]:
         "immaterial": list(rv.immaterial),
         "correlated": list(rv.correlated),
         "weak": list(rv.weak),
+        "wander": list(rv.wander),
         "fell_back": rv.fell_back,
         "withdrawn": rv.withdrawn,
         "statement": (
