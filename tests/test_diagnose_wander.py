@@ -94,6 +94,8 @@ def test_null_worlds_with_a_random_walk_offset_stay_quiet() -> None:
             report = diagnose_data(d, rng=np.random.default_rng(0)).report.to_json()
             if _significant(report):
                 named.append((attitude, seed, _significant(report)))
+            if report["honesty"]["wander"] and report["gap"]["unexplained"]:
+                assert "wanders slowly" in report["gap"]["statement"]
             for name in report["honesty"]["wander"]:
                 e = next(e for e in report["effects"] if e["name"] == name)
                 assert e["status"] == "wander" and not e["significant"]

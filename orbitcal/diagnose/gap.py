@@ -198,6 +198,7 @@ def gap_section(
             f"an unexplained gap: the held-out residual is {rms:.3g} nT per component, "
             f"{times:.1f} x the noise floor ({sigma:.3g} nT); no candidate explains it"
             + _lies(where.get("concentration"))
+            + _wandering([e["name"] for e in report["effects"] if e.get("status") == "wander"])
         )
     else:
         gap["statement"] = (
@@ -277,3 +278,14 @@ def _lies(concentration: object) -> str:
     if concentration == "eclipse":
         return "; it lies mostly in eclipse"
     return f"; it lies mostly at {concentration}"
+
+
+def _wandering(names: Sequence[str]) -> str:
+    """The clause of a gap statement for candidates withdrawn as within the noise's wander."""
+    if not names:
+        return ""
+    return (
+        "; it wanders slowly, as colored noise of the sensor (a random-walk or 1/f offset) "
+        f"does, and {', '.join(names)} {'is' if len(names) == 1 else 'are'} no larger than "
+        "that wander (the floor above is the white part of the noise only)"
+    )
