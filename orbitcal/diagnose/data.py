@@ -18,7 +18,7 @@ from functools import cached_property
 import numpy as np
 import numpy.typing as npt
 
-from orbitcal.arrays import BoolArray, FloatArray
+from orbitcal.arrays import BoolArray, FloatArray, IntArray
 from orbitcal.diagnose.prior import CalibrationPrior
 from orbitcal.diagnose.track import along_track
 from orbitcal.geomag import dipole_axis_itrs, magnetic_latitude_deg
@@ -57,6 +57,35 @@ def _time_derivative(t_s: FloatArray, y: FloatArray) -> FloatArray:
         elif n == 2:
             out[seg] = (y[seg][1] - y[seg][0]) / (t_s[seg][1] - t_s[seg][0])
     return out
+
+
+#: Relative unevenness of the four steps around a sample below which the fourth-order stencil
+#: of the body rate is used (:func:`_rate_fourth_order`) [-].
+EVEN_STEPS_REL = 1e-3
+
+
+def _rate_fourth_order(r: FloatArray, t_s: FloatArray) -> tuple[IntArray, FloatArray]:
+    """The body rate [rad/s] at the samples of one contiguous run whose two neighbours on each
+    side are evenly spaced (within :data:`EVEN_STEPS_REL`): ``(8 (th_1 - th_-1) - (th_2 - th_-2))
+    / 12 h`` with ``th_k`` the log map of ``R(t + k h) R(t)^T``; exact for a steady spin, and
+    fourth order in ``h`` where the rate changes. Returns the samples' positions and rates."""
+    from scipy.spatial.transform import Rotation
+
+    n = t_s.size
+    i = np.arange(2, n - 2)
+    steps = np.diff(t_s)
+    h = steps[i]
+    even = np.ones(i.size, dtype=bool)
+    for d in (-2, -1, 1):
+        even &= np.abs(steps[i + d] - h) <= EVEN_STEPS_REL * h
+    i, h = i[even], h[even]
+
+    def theta(k: int) -> FloatArray:
+        rel = np.einsum("nij,nkj->nik", r[i + k], r[i])  # R(t + k h) R(t)^T, body axes
+        return np.asarray(Rotation.from_matrix(rel).as_rotvec())
+
+    rate = (8.0 * (theta(1) - theta(-1)) - (theta(2) - theta(-2))) / (12.0 * h)[:, None]
+    return i, np.asarray(rate)
 
 
 #: Largest time between the evaluations of the reference field's gradient along the track [s]
@@ -191,7 +220,13 @@ class DiagnosisData:
         """Angular velocity of the body relative to ITRS, body axes [rad/s], shape (N, 3).
 
         From the rotation between the neighbouring samples (log map, central where possible), so a
-        fast, steady spin is differentiated exactly rather than by chords.
+        fast, steady spin is differentiated exactly rather than by chords; where the two samples
+        on each side are evenly spaced, by the fourth-order central stencil of the log map
+        relative to the sample (:func:`_rate_fourth_order`): a spin with a nutation of a few
+        minutes' period changes its rate within the +-10 s of a central difference at a 10 s
+        cadence, and the time-offset template built on the second-order rate was 2-3 % short
+        (independent worlds' tumbling time offsets came out 2-3 % large, outside their 90 %
+        intervals).
         """
         from scipy.spatial.transform import Rotation
 
@@ -207,6 +242,9 @@ class DiagnosisData:
             rel = np.einsum("nij,nkj->nik", r[hi], r[lo])  # R(hi) R(lo)^T, body axes
             rotvec = Rotation.from_matrix(rel).as_rotvec()
             out[idx] = rotvec / (t[hi] - t[lo])[:, None]
+            if idx.size >= 5:
+                inner, rate = _rate_fourth_order(r[idx], t[idx])
+                out[idx[inner]] = rate
         return out
 
     @cached_property
