@@ -460,3 +460,23 @@ def test_a_sun_driven_verdict_without_an_eclipse_on_a_short_span_is_not_the_suns
 def test_where_the_gap_lies_reads_as_a_sentence(concentration: str | None, clause: str) -> None:
     """The statement once read "it lies mostly at everywhere" (independent seed 9700 world 13)."""
     assert _lies(concentration) == clause
+
+
+def test_the_blocks_of_the_final_fit_are_named_as_the_attribution_recorded_them() -> None:
+    """The currents chosen first by the stepwise selection have the first block: the old guess
+    (regressed effects first, the currents last) named the temperature's block the currents'
+    (compound case 21 of tests/test_diagnose_compound.py lost its real temperature)."""
+    import dataclasses
+
+    from orbitcal.diagnose.honesty import _fit_names
+
+    data, att = _null_attribution(slow_nt=0.0)
+    blocks = [get_effect(n).design(data, att.train) for n in ("time_offset", "parameter_drift")]
+    fit = fit_joint(data, att.train, [b for b in blocks if b is not None])
+    selected = ["field_aligned_currents", "time_offset"]
+    guessed = dataclasses.replace(att, selected=selected, fits={**att.fits, "final": fit})
+    recorded = dataclasses.replace(guessed, final_block_names=["time_offset", "parameter_drift"])
+    assert _fit_names(recorded) == ["time_offset", "parameter_drift"]
+    assert _fit_names(guessed) == ["time_offset", "field_aligned_currents"]  # the old guess
+    wrong_length = dataclasses.replace(guessed, final_block_names=["time_offset"])
+    assert _fit_names(wrong_length) == []

@@ -263,10 +263,20 @@ def _still_significant(
 
 
 def _fit_names(att: Attribution) -> list[str]:
-    """The effect name of every block of the final joint fit, in order."""
+    """The effect name of every block of the final joint fit, in order.
+
+    As the attribution recorded them; an attribution built without that record (a test's) has
+    the regressed effects first and the auroral currents' regional block last. That guess was
+    the only way until 2026-11-26, and wrong where the stepwise selection chose the currents
+    first: every drop-one test then dropped another effect's block (a real temperature of a
+    compound world was withdrawn as within the noise's wander, judged on the currents' field).
+    """
     fit = att.fits.get("final")
     if fit is None:
         return []
+    if att.final_block_names is not None:
+        names = list(att.final_block_names)
+        return names if len(names) == len(fit.blocks) else []
     regress = [n for n in att.selected if n not in OWN_TEST]
     names = regress[: len(fit.blocks)]
     if len(names) < len(fit.blocks) and "field_aligned_currents" in att.selected:

@@ -317,21 +317,25 @@ def _report_models(
     chosen_blocks: Sequence[DesignBlock],
     named_regionally: Sequence[Effect],
     options: AttributionOptions,
-) -> tuple[_Model, _Model]:
-    """The report's baseline and final model. When the others were judged on an effect's quiet
-    samples only, both on every sample: the calibration fitted on all training samples, and the
-    selected effects with the regional effects' models fitted jointly."""
+    chosen_names: Sequence[str],
+) -> tuple[_Model, _Model, list[str]]:
+    """The report's baseline and final model, and the effect of each of the final model's
+    blocks. When the others were judged on an effect's quiet samples only, both on every
+    sample: the calibration fitted on all training samples, and the selected effects with the
+    regional effects' models fitted jointly."""
     if split.report_base is None:
-        return split.base, final
+        return split.base, final, list(chosen_names)
     final_blocks = list(chosen_blocks)
+    names = list(chosen_names)
     for eff in named_regionally:
         block = eff.design(data, split.report_train)
         if block is not None and block.all_finite():
             final_blocks.append(block)
+            names.append(eff.name)
     fit = fit_joint(data, split.report_train, final_blocks, robust=options.robust)
     r = data.b_raw_nt - fit.predict_nt(data)
     # the report's baseline: its RMS on every held-out sample
-    return split.report_base, _Model(fit, r, norm_rms_nt(r[split.report_holdout]))
+    return split.report_base, _Model(fit, r, norm_rms_nt(r[split.report_holdout])), names
 
 
 def attribute(
@@ -407,8 +411,8 @@ def attribute(
     )
     if named_regionally and nothing_selected:
         confidence = None  # the verdict is a regional test's, not the held-out chunks'
-    report_base, report_final = _report_models(
-        data, split, final, chosen_blocks, named_regionally, options
+    report_base, report_final, final_names = _report_models(
+        data, split, final, chosen_blocks, named_regionally, options, [c.name for c in chosen]
     )
     splits = split_fit_tests(data, robust=options.robust) if options.split_tests else []
     return Attribution(
@@ -430,4 +434,5 @@ def attribute(
         span_s=float(data.t_utc_s[-1] - data.t_utc_s[0]),
         dropped=stepwise.dropped,
         fit_mask=None if fit_mask is None else np.asarray(fit_mask, dtype=bool),
+        final_block_names=final_names,
     )

@@ -135,6 +135,8 @@ class Attribution:
         Time span of the data [s].
     fit_mask : ndarray of bool or None
         The samples every fit was restricted to (None: all), as given to :func:`attribute`.
+    final_block_names : list of str or None
+        The effect of every block of ``fits["final"]``, in order (None: not recorded).
     """
 
     baseline_rms_nt: float
@@ -155,6 +157,7 @@ class Attribution:
     span_s: float = 0.0
     dropped: list[str] = field(default_factory=list)
     fit_mask: BoolArray | None = None
+    final_block_names: list[str] | None = None
 
 
 def _params(fit: JointFit, k: int) -> dict[str, Any]:
