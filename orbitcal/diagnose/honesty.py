@@ -579,12 +579,12 @@ def _wander(
         return {}
     names = [n for n in fit_names if n in keep]  # the blocks of ``final.fit``, in order
     fields = {n: final.fit.effect_nt(k) for k, n in enumerate(names) if n not in OWN_TEST}
-    samples = att.train.copy()
-    if att.fit_mask is not None:
-        samples &= att.fit_mask
+    used = np.ones(data.n, dtype=bool) if att.fit_mask is None else att.fit_mask.copy()
     if "field_aligned_currents" in att.selected:
-        samples &= np.abs(data.mlat_deg) < QUIET_MLAT_DEG
-    return within_wander(data.t_utc_s, final.residual_nt, fields, samples, att.span_s)
+        used &= np.abs(data.mlat_deg) < QUIET_MLAT_DEG
+    return within_wander(
+        data.t_utc_s, final.residual_nt, fields, att.train & used, att.span_s, used
+    )
 
 
 def _weak_currents(data: DiagnosisData, att: Attribution, keep: Sequence[str]) -> list[str]:

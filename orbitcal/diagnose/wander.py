@@ -88,18 +88,23 @@ def within_wander(
     fields_nt: dict[str, FloatArray],
     samples: BoolArray,
     span_s: float,
+    field_samples: BoolArray | None = None,
 ) -> dict[str, tuple[float, float]]:
     """The effects of ``fields_nt`` (name -> fitted field at every sample) within the noise's
-    wander on ``samples``: name -> (its field's variation, the wander) [nT], for those whose
-    variation is below the wander / :data:`WANDER_RATIO`."""
+    wander on ``samples`` (training): name -> (its field's variation on ``field_samples``, all
+    samples by default, the wander) [nT], for those whose variation is below the wander /
+    :data:`WANDER_RATIO`. The variation is taken beyond the training samples: a field that is
+    flat there (a sensor temperature that starts changing in the held-out blocks) would
+    otherwise count as none."""
     if span_s < WANDER_MIN_SPAN_S or int(samples.sum()) < 10:
         return {}
+    where = np.ones(t_s.size, dtype=bool) if field_samples is None else field_samples
     wander = slow_wander_nt(t_s[samples], residual_nt[samples])
     if not np.isfinite(wander):
         return {}
     out = {}
     for name, f in fields_nt.items():
-        variation = field_variation_nt(f[samples])
+        variation = field_variation_nt(f[where])
         ratio = WITNESSED_RATIO if name in WITNESSED else WANDER_RATIO
         if wander > ratio * variation:
             out[name] = (variation, wander)
