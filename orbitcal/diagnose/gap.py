@@ -285,7 +285,7 @@ def _wandering(names: Sequence[str]) -> str:
     if not names:
         return ""
     return (
-        "; it wanders slowly, as colored noise of the sensor (a random-walk or 1/f offset) "
-        f"does, and {', '.join(names)} {'is' if len(names) == 1 else 'are'} no larger than "
-        "that wander (the floor above is the white part of the noise only)"
+        "; it wanders slowly, as a random-walk or 1/f offset of the sensor would (or a field "
+        f"no template draws), and {', '.join(names)} {'is' if len(names) == 1 else 'are'} no "
+        "larger than that wander (the floor above is the white part of the noise only)"
     )

@@ -293,12 +293,20 @@ class _Final:
 
 
 def _refit(
-    data: DiagnosisData, att: Attribution, fit_names: Sequence[str], keep: Sequence[str]
+    data: DiagnosisData,
+    att: Attribution,
+    fit_names: Sequence[str],
+    keep: Sequence[str],
+    blockless: Sequence[str] = (),
 ) -> _Final:
+    """The final model of the effects ``keep`` (those of ``blockless`` named without their
+    block), refitted on the training samples."""
     from orbitcal.diagnose.attribution import fit_joint
 
     fit = att.fits["final"]
-    blocks = [b for b, n in zip(fit.blocks, fit_names, strict=True) if n in keep]
+    blocks = [
+        b for b, n in zip(fit.blocks, fit_names, strict=True) if n in keep and n not in blockless
+    ]
     if not blocks:
         r = att.baseline_residual_nt
         return _Final(
@@ -365,6 +373,7 @@ class Review:
     correlated: list[str] = field(default_factory=list)
     weak: list[str] = field(default_factory=list)
     wander: dict[str, tuple[float, float]] = field(default_factory=dict)
+    blockless: list[str] = field(default_factory=list)
     gap_unexplained: bool = False
     verdict: str = "none"
 
@@ -440,10 +449,22 @@ def review(data: DiagnosisData, att: Attribution) -> Review:
             final = _refit(data, att, fit_names, keep)
     fell_back = False
     withdrawn: list[str] = []
-    while final.rms_nt > att.baseline_rms_nt and keep and fit_names:
+    # Effects named by their own test keep their name when their fitted model is what makes the
+    # final model worse: only their block leaves it (independent worlds' auroral currents change
+    # strength from crossing to crossing, and a model fitted on the training crossings predicted
+    # the held-out ones worse than none).
+    blockless: list[str] = []
+    while final.rms_nt > att.baseline_rms_nt and fit_names:
+        movable = [n for n in keep if n not in blockless]
+        if not movable:
+            break
         fell_back = True
-        withdrawn.append(keep.pop())
-        final = _refit(data, att, fit_names, keep)
+        if movable[-1] in OWN_TEST and movable[-1] in fit_names:
+            blockless.append(movable[-1])
+        else:
+            withdrawn.append(movable[-1])
+            keep.remove(movable[-1])
+        final = _refit(data, att, fit_names, keep, blockless)
     if final.rms_nt > att.baseline_rms_nt and keep:
         # Effects judged by their own tests (no block in the final fit) cannot be refitted out.
         fell_back = True
@@ -465,6 +486,7 @@ def review(data: DiagnosisData, att: Attribution) -> Review:
         correlated=correlated,
         weak=weak,
         wander=wander,
+        blockless=blockless,
         gap_unexplained=unexplained,
         verdict=_verdict(keep),
     )
@@ -727,7 +749,7 @@ def review_report(
     rv = rv if rv is not None else review(data, att)
     _mark_withdrawn(report, att, rv)
     changed = rv.keep != list(att.selected)
-    if changed:
+    if changed or rv.blockless:
         _final_section(report, data, att, rv)
     if changed and rv.verdict != report["verdict"]:
         # the attribution's status spoke of the verdict withdrawn, not of this one
@@ -833,6 +855,11 @@ def _mark_withdrawn(report: dict[str, Any], att: Attribution, rv: Review) -> Non
         "the independent stretches it spans (the chunks' autocorrelation), it is not "
         f"significant at {CORRELATED_ALPHA:g}",
     )
+    for name in rv.blockless:
+        by_name[name]["model_left_out_reason"] = (
+            "named by its own regional test, but its fitted model predicted the held-out "
+            "blocks worse than none: the final model leaves it out"
+        )
     for name, (variation, wander) in rv.wander.items():
         _withdraw(by_name, [name], "wander", "wander_reason", wander_reason(variation, wander))
     _withdraw(
@@ -872,7 +899,9 @@ def _final_section(
 
     keep, final = rv.keep, rv.final
     by_name = {e["name"]: e for e in report["effects"]}
-    report["final"]["effects"] = list(keep)
+    report["final"]["effects"] = [n for n in keep if n not in rv.blockless]
+    if rv.blockless:
+        report["final"]["named_without_model"] = list(rv.blockless)
     report["final"]["holdout_rms_nt"] = round(final.rms_nt / np.sqrt(3.0), 4)
     report["final"]["norm_holdout_rms_nt"] = round(final.rms_nt, 4)
     report["final"]["shrink"] = round(att.baseline_rms_nt / max(final.rms_nt, 1e-12), 4)
@@ -897,13 +926,25 @@ def _honesty_section(rv: Review) -> dict[str, Any]:
         "wander": list(rv.wander),
         "fell_back": rv.fell_back,
         "withdrawn": rv.withdrawn,
-        "statement": (
-            "the selected model was worse on the held-out blocks than the calibration alone: "
-            f"{', '.join(rv.withdrawn)} withdrawn"
-            if rv.fell_back
-            else "the final model is no worse than the calibration alone on the held-out blocks"
-        ),
+        "named_without_model": list(rv.blockless),
+        "statement": _fall_back_words(rv),
     }
+
+
+def _fall_back_words(rv: Review) -> str:
+    if not rv.fell_back:
+        return "the final model is no worse than the calibration alone on the held-out blocks"
+    out = "the selected model was worse on the held-out blocks than the calibration alone: "
+    parts = []
+    if rv.withdrawn:
+        parts.append(f"{', '.join(rv.withdrawn)} withdrawn")
+    if rv.blockless:
+        parts.append(
+            f"{', '.join(rv.blockless)} left out of the final model but still named by "
+            "their own regional test (their fitted model did not predict the held-out "
+            "crossings)"
+        )
+    return out + "; ".join(parts)
 
 
 def reviewed(data: DiagnosisData, att: Attribution, rv: Review | None = None) -> Attribution:

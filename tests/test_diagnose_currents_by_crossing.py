@@ -1,0 +1,50 @@
+"""Auroral currents whose strength and sign change from crossing to crossing (as real ones do,
+and as the independent generator's): the regional test finds them, but a model fitted on the
+training crossings predicts the held-out ones worse than none. The fall-back then used to
+withdraw the currents with their model (the verdict "none" on all four worlds below); now only
+their model leaves the final one and they stay named."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from test_diagnose_worlds import make_world
+
+from orbitcal.diagnose.api import diagnose_data
+from orbitcal.geomag import dipole_axis_itrs, magnetic_latitude_deg
+
+
+def _with_currents_by_crossing(attitude: str, seed: int) -> object:
+    d = make_world("none", attitude=attitude, seed=seed).data
+    mlat = magnetic_latitude_deg(d.r_itrs_km)
+    sheet = np.exp(-0.5 * ((np.abs(mlat) - 66.0) / 2.5) ** 2)
+    high = np.abs(mlat) > 55.0
+    crossing = np.cumsum(np.r_[0, np.diff(high.astype(int)) == 1])
+    strength_nt = np.random.default_rng(seed).uniform(-250.0, 250.0, crossing.max() + 1)[crossing]
+    up = d.r_itrs_km / np.linalg.norm(d.r_itrs_km, axis=1, keepdims=True)
+    east = np.cross(dipole_axis_itrs(), up)
+    east /= np.linalg.norm(east, axis=1, keepdims=True)
+    east_body = np.einsum("nij,nj->ni", d.rot_itrs_to_body, east)
+    return dataclasses.replace(d, b_raw_nt=d.b_raw_nt + (strength_nt * sheet)[:, None] * east_body)
+
+
+@pytest.mark.parametrize(("attitude", "seed"), [("nadir", 1), ("nadir", 3), ("tumbling", 1)])
+def test_currents_that_no_model_predicts_stay_named_without_their_model(
+    attitude: str, seed: int
+) -> None:
+    data = _with_currents_by_crossing(attitude, seed)
+    report = diagnose_data(data, rng=np.random.default_rng(0)).report.to_json()  # type: ignore[arg-type]
+    assert report["verdict"] == "field_aligned_currents"
+    assert [e["name"] for e in report["effects"] if e["significant"]] == ["field_aligned_currents"]
+    assert report["final"]["named_without_model"] == ["field_aligned_currents"]
+    assert "field_aligned_currents" not in report["final"]["effects"]
+    assert report["final"]["holdout_rms_nt"] <= report["baseline"]["holdout_rms_nt"]
+    assert report["honesty"]["withdrawn"] == []
+    assert "left out of the final model" in report["honesty"]["statement"]
+    fac = report["effects"][0]
+    assert "regional test" in fac["model_left_out_reason"]
+    # the gap they leave is stated, where they are
+    assert report["gap"]["unexplained"]
+    assert "|mlat|" in report["gap"]["statement"]
