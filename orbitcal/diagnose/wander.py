@@ -4,16 +4,17 @@ A sensor whose offset wanders (a random walk, 1/f noise) by a nT or two over hou
 residual that no template fits and that the held-out blocks cannot tell from a small effect: a
 drift, an external field's trend or an orbit error that follows the wander into the held-out
 blocks shrinks them chunk after chunk, and was called significant on independent null worlds
-(seeds 9500-9700: 6 of 54 null worlds, 5 of them random-walk or 1/f noise).
+(seeds 9500-9700: 6 of 54 null worlds, all six of random-walk or 1/f noise).
 
 What tells them apart is on the training samples. A real effect, once modelled, leaves a residual
 whose average over half an hour is flat (what is left is white noise averaged over a few hundred
 samples); a wander leaves such averages of the size of what the effect drew from it. So over spans
-of at least :data:`WANDER_MIN_SPAN_S`, an effect whose fitted field (its variation over the
-training samples, RMS per component) is less than ``1 /`` :data:`WANDER_RATIO` times the
+of at least :data:`WANDER_MIN_SPAN_S`, an effect whose fitted field (its variation over every
+sample the fits use, RMS per component) is less than ``1 /`` :data:`WANDER_RATIO` times the
 :data:`WANDER_WINDOW_S` moving average of the final model's training residual (RMS per component)
-cannot be told from the noise and is withdrawn (``status: "wander"``), unless its field follows a
-measured column of the telemetry (:data:`WITNESSED`).
+cannot be told from the noise and is withdrawn (``status: "wander"``); a field that follows a
+telemetry column or a published model (:data:`WITNESSED`) only when it is smaller than the wander
+itself (:data:`WITNESSED_RATIO`).
 
 The ratio (wander / variation) measured when the test was added: real effects 0.005-0.057
 (eight parameter-drift worlds of ``orbitcal simulate`` at magnitude 0.5 and 1, nadir and
@@ -25,7 +26,6 @@ external field on 1/f noise, an orbit error on a random walk).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 
 import numpy as np
 
@@ -120,8 +120,3 @@ def wander_reason(variation_nt: float, wander_nt: float) -> str:
         "wandering offset (random-walk or 1/f noise) draws, and the held-out blocks cannot tell "
         "it from one"
     )
-
-
-def names_within(found: dict[str, tuple[float, float]], keep: Sequence[str]) -> list[str]:
-    """The names of ``found`` in the order of ``keep``."""
-    return [n for n in keep if n in found]
