@@ -108,11 +108,18 @@ def test_the_storm_pass_through_the_command_line(tmp_path: Path, kind: str, seed
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    ("seed", "immaterial", "verdict"),
-    [(3314, "nonlinearity", "external_field"), (3317, "time_offset", "none")],
+    ("seed", "small", "status", "verdict"),
+    [
+        (3314, "nonlinearity", "immaterial", "external_field"),
+        # Until the external field's forms were kept within their ranges on short spans its
+        # trend ran out of range here, the verdict was "none" and the time offset was withdrawn
+        # as immaterial; now the external field's constant is named (held-out 173 -> 99 nT) and
+        # the time offset beside it is a possible residue.
+        (3317, "time_offset", "possible residue", "external_field"),
+    ],
 )
 def test_a_small_gain_beside_a_large_gap_is_not_named(
-    tmp_path: Path, seed: int, immaterial: str, verdict: str
+    tmp_path: Path, seed: int, small: str, status: str, verdict: str
 ) -> None:
     # A slow tumble (0.3 deg/s: half a turn in the 30 minutes): the held-out residual stays
     # 50-100 x the noise floor whatever is fitted, and a flexible effect that removes a few per
@@ -122,9 +129,12 @@ def test_a_small_gain_beside_a_large_gap_is_not_named(
     assert main(["diagnose", str(table), "--attitude-frame", "ITRS", "--out", str(out)]) == 0
     report = json.loads(out.read_text())
     by_name = {e["name"]: e for e in report["effects"]}
-    assert report["honesty"]["immaterial"] == [immaterial]
-    assert by_name[immaterial]["significant"] is False
-    assert by_name[immaterial]["status"] == "immaterial"
+    if status == "immaterial":
+        assert report["honesty"]["immaterial"] == [small]
+    else:
+        assert small in report["honesty"]["possible_residue"]
+    assert by_name[small]["significant"] is False
+    assert by_name[small]["status"] == status
     assert report["verdict"] == verdict
     assert {e["name"] for e in report["effects"] if e["significant"]} <= ALLOWED
     assert report["gap"]["unexplained"] and report["gap"]["times_noise"] > 10.0
@@ -151,7 +161,7 @@ def test_a_time_offset_beside_the_external_field_on_a_short_span_is_a_possible_r
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("seed", [3303, 3320])
+@pytest.mark.parametrize("seed", [3303])  # 3320 too, until its external field was named
 def test_a_gap_the_calibration_extrapolation_makes_is_said_to_be_inseparable(
     tmp_path: Path, seed: int
 ) -> None:
@@ -172,3 +182,28 @@ def test_a_gap_the_calibration_extrapolation_makes_is_said_to_be_inseparable(
     assert all(c["name"] in status for c in report["gap"]["closest_candidates"])
     assert report["verdict_confidence"] is None
     assert {e["name"] for e in report["effects"] if e["significant"]} <= ALLOWED
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("seed", "rate_deg_s"), [(3404, 2.5), (3320, 0.3)])
+def test_the_external_field_named_by_its_constant_when_its_trend_leaves_the_physics(
+    tmp_path: Path, seed: int, rate_deg_s: float
+) -> None:
+    # On the quiet latitudes of the pass the training BIC preferred a form of the external field
+    # with a change the ring current cannot have (beyond 300 nT/h: a trend taking up the latitude
+    # structure along the one track), the field was refused whole as implausible, and a
+    # nonlinearity (3404, a fast tumble) or "none" with the gap said to be the calibration's
+    # extrapolation (3320, a slow one) stood in its place. The forms within the physical ranges
+    # are tried first now (3404 drawn after the rule was written: seeds 3400-3411 at 1 deg/s
+    # changed the chosen form in 3 of 12, and this is the one at 2.5 deg/s whose verdict moved;
+    # 3320 is an earlier test's draw, held-out 157 -> 72 nT with the constant).
+    table, out = tmp_path / "pass.csv", tmp_path / "report.json"
+    _table(table, "tumbling", seed, rate_deg_s=rate_deg_s)
+    assert main(["diagnose", str(table), "--attitude-frame", "ITRS", "--out", str(out)]) == 0
+    report = json.loads(out.read_text())
+    by_name = {e["name"]: e for e in report["effects"]}
+    external = by_name["external_field"]
+    assert report["verdict"] == "external_field", report["verdict_status"]
+    assert external["status"] == "selected" and external["implausible_reason"] is None
+    assert {e["name"] for e in report["effects"] if e["significant"]} <= ALLOWED
+    assert report["final"]["holdout_rms_nt"] < report["baseline"]["holdout_rms_nt"]

@@ -33,6 +33,7 @@ from orbitcal.diagnose.data import (
     DiagnosisData,
     _time_derivative,
 )
+from orbitcal.diagnose.span_options import ORBIT_S
 
 __all__ = ["DesignBlock", "DesignFn"]
 
@@ -66,9 +67,14 @@ class DesignBlock:
     indexed : bool
         The form is driven by a measured index (the RC index, an RC-driven model).
     unless_indexed : bool
-        The form is tried only when no ``indexed`` alternative beats the first form on training
-        BIC (by :data:`~orbitcal.diagnose.attribution.joint_fit.INDEX_TRACKS_BIC`): a storm's
-        shape drawn from the data where the index does not follow the field.
+        A storm's shape drawn from the data alone: where an ``indexed`` alternative beats the
+        first form on training BIC (by
+        :data:`~orbitcal.diagnose.attribution.joint_fit.INDEX_TRACKS_BIC`) and this form beats
+        that, it must also predict the end of the training span better (``_forward_choice``).
+    in_range_forms : bool
+        When the form the training BIC prefers fits only with a parameter outside its physical
+        range, the best form that fits within the ranges is taken instead (the external field
+        on a span shorter than an orbit: ``joint_fit._plausible``).
     """
 
     source: FloatArray | Columns
@@ -80,6 +86,7 @@ class DesignBlock:
     searched: int = field(default=0, compare=False)
     indexed: bool = field(default=False, compare=False)
     unless_indexed: bool = field(default=False, compare=False)
+    in_range_forms: bool = field(default=False, compare=False)
 
     @property
     def n(self) -> int:
@@ -258,6 +265,21 @@ def _design_external(data: DiagnosisData, train: BoolArray) -> DesignBlock | Non
                 variant=f"recovery_{tau_h:.3g}h",
             )
         )
+    t_train = data.t_utc_s[train]
+    short = bool(t_train.size) and float(t_train[-1] - t_train[0]) < ORBIT_S
+    if short:
+        # On a span shorter than an orbit the track passes each region once, so time along it
+        # is position: a trend then takes up a field's latitude structure (the storm pass's
+        # subauroral fields asked 420-760 nT/h of it, beyond a storm's 300 nT/h) and carries it
+        # into the held-out blocks. The constant alone is the form left when the trend runs out
+        # of its range (``in_range_forms``).
+        options.append(
+            DesignBlock(
+                ScaledVectorColumns(data.n, [axis], [None]),
+                ["uniform_along_dipole_nt"],
+                variant="uniform",
+            )
+        )
     rc = data.rc_index_nt
     if rc is not None and _varies(rc[train], tol=1.0):
         options.append(
@@ -289,7 +311,9 @@ def _design_external(data: DiagnosisData, train: BoolArray) -> DesignBlock | Non
     # Last: tried only when no index-driven form above follows the field (``unless_indexed``).
     options += _storm_variants(data, train, axis)
     first = options[0]
-    return DesignBlock(first.source, first.names, first.variant, tuple(options[1:]))
+    return DesignBlock(
+        first.source, first.names, first.variant, tuple(options[1:]), in_range_forms=short
+    )
 
 
 #: Times of the storm's minimum tried on the training span (10 % to 90 %), refined by halving

@@ -226,6 +226,21 @@ def verdict_status(
         if absorbed and not gap["inseparable"]
         else ""
     )
+    # Beside the candidates that would shrink the held-out residual, those the calibration takes
+    # up so whole that they shrink nothing (a uniform external field under nadir pointing is a
+    # change of scale): unseen as well, and said so.
+    rest = [n for n in absorbed if n not in gap["inseparable"]]
+    also = (
+        "; the calibration also takes up "
+        + ", ".join(rest)
+        + f" whole on this span (>= {INSEPARABLE_LIMIT:.0%} of "
+        + ("its" if len(rest) == 1 else "each one's")
+        + " fitted field is a change of the 12 parameters): if present, "
+        + ("it cannot" if len(rest) == 1 else "they cannot")
+        + " be separated from the calibration on this span either"
+        if rest and gap["inseparable"]
+        else ""
+    )
     separation = {s["effect"]: s for s in report.get("separation") or []}
     verdict = report["verdict"]
     report["separable"] = None if verdict == "none" else verdict not in separation
@@ -233,7 +248,7 @@ def verdict_status(
     if verdict == "none":
         if gap["unexplained"] and gap["inseparable"]:
             report["verdict_confidence"] = None
-            report["verdict_status"] = "none: " + gap["inseparable_statement"]
+            report["verdict_status"] = "none: " + gap["inseparable_statement"] + also
         elif gap["unexplained"]:
             report["verdict_confidence"] = None
             report["verdict_status"] = "none: " + gap["statement"] + unseen
@@ -241,7 +256,7 @@ def verdict_status(
             report["verdict_status"] = "none: at the noise floor" + unseen
     elif verdict in own_test and gap["unexplained"] and gap["inseparable"]:
         report["verdict_status"] = (
-            f"{verdict} on their own latitudes; beside them, " + gap["inseparable_statement"]
+            f"{verdict} on their own latitudes; beside them, " + gap["inseparable_statement"] + also
         )
     elif verdict in own_test and unseen:
         report["verdict_status"] = (

@@ -188,7 +188,11 @@ class GroupSelection(Selection):
                     chosen = self.design_beside(c.name, [*fixed, *beside])
                 elif self.designs[c.name].alternatives:
                     chosen = _resolve(
-                        self.data, self.train, [*fixed, *beside], self.designs[c.name]
+                        self.data,
+                        self.train,
+                        [*fixed, *beside],
+                        self.designs[c.name],
+                        robust=self.robust,
                     )
                 else:
                     continue

@@ -13,14 +13,20 @@ from typing import Any
 import numpy as np
 
 from orbitcal.arrays import BoolArray, FloatArray, IntArray
-from orbitcal.diagnose.attribution.joint_fit import JointFit, _bic, _resolve, _sd, fit_joint
+from orbitcal.diagnose.attribution.joint_fit import (
+    JointFit,
+    _bic,
+    _resolve,
+    _twins,
+    fit_joint,
+    outside_range,
+)
 from orbitcal.diagnose.attribution.significance import _chunk_test, _support
 from orbitcal.diagnose.attribution.uncertainty import _autocorr_inflation
 from orbitcal.diagnose.effects import (
     DesignBlock,
     DiagnosisData,
     Effect,
-    block_ranges,
     get_effect,
 )
 from orbitcal.metrics import norm_rms_nt
@@ -131,7 +137,7 @@ class Selection:
         self, fixed: Sequence[DesignBlock], block: DesignBlock, *, bounded: bool = True
     ) -> tuple[JointFit, FloatArray, float]:
         """Fit ``block`` (its variant chosen by training BIC) with ``fixed``; residual and RMS."""
-        chosen = _resolve(self.data, self.train, fixed, block, bounded=bounded)
+        chosen = _resolve(self.data, self.train, fixed, block, bounded=bounded, robust=self.robust)
         return self.fit([*fixed, chosen], bounded=bounded)
 
     def fit(
@@ -251,22 +257,7 @@ class Selection:
             return None  # the range costs nothing: the data leave that direction open
         p_free, gains_free = self.judge(free, r_free, r_before, rms_free, rms_before)
         wins = p_free < level and gains_free
-        bl = free.blocks[-1]
-        # Outside by more than 3 standard deviations: a direction the data leave open (a column
-        # the calibration absorbs whole) may take any value and proves nothing; a value
-        # compatible with zero (a crust amplitude of 0 +- 0.1) means the effect is absent.
-        outside = [
-            f"{n} = {float(v):.4g} +- {float(e):.2g} outside {rng.describe()}"
-            for n, v, e, rng in zip(
-                bl.names,
-                free.coef[-1],
-                _sd(free, len(free.blocks) - 1),
-                block_ranges(bl),
-                strict=True,
-            )
-            if not (rng.lower - 3.0 * e <= float(v) <= rng.upper + 3.0 * e)
-            and abs(float(v)) > 3.0 * e  # compatible with zero: absent, not implausible
-        ]
+        outside = outside_range(free, len(free.blocks) - 1)
         if not outside:
             return None
         how = "wins only by leaving" if wins else "its fit runs out of"
@@ -396,18 +387,3 @@ class Selection:
             if fails and (worst is None or p > worst[0]):
                 worst = (p, name)
         return None if worst is None else worst[1]
-
-
-#: Two fitted models whose predictions on the training samples differ by less than this, in
-#: units of the noise variance summed over samples (the non-centrality of the likelihood-ratio
-#: test between them), cannot be told apart by the data: a 3-sigma separation.
-TWIN_SEPARATION = 9.0
-
-
-def _twins(
-    fit_a: JointFit, r_a: FloatArray, fit_b: JointFit, r_b: FloatArray, train: BoolArray
-) -> bool:
-    """Whether two fits (with their residuals at every sample) predict the same data."""
-    d = r_a[train] - r_b[train]  # difference of residuals = difference of predictions
-    sigma = max(min(fit_a.sigma_nt, fit_b.sigma_nt), 1e-9)
-    return bool(float(np.sum(d**2)) / sigma**2 < TWIN_SEPARATION)
