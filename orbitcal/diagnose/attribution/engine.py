@@ -24,6 +24,8 @@ from orbitcal.diagnose.attribution.uncertainty import (
     _intervals,
     _shrink_interval,
     _verdict_confidence,
+    template_systematic,
+    through_sensor,
 )
 from orbitcal.diagnose.effects import CATALOGUE, DesignBlock, DiagnosisData, Effect
 from orbitcal.diagnose.options import AttributionOptions
@@ -197,9 +199,10 @@ def _ranked_effects(
     data, train, holdout, n_chunks = sel.data, sel.train, sel.holdout, sel.n_chunks
     single, implausible = stepwise.single, stepwise.implausible
     cal_basis = _calibration_basis(data, train)
+    shown = through_sensor(data, final.fit, train, robust=sel.robust)
     effects: list[EffectScore] = []
     for k, sc in enumerate(step_scores):
-        params = _params(final.fit, k)  # final joint values
+        params = _params(shown, k) if k < len(shown.blocks) else _params(final.fit, k)
         if sc.name in indistinguishable:
             params["indistinguishable_from"] = indistinguishable[sc.name]
         before_r, after_r = step_residuals[k]
@@ -213,7 +216,15 @@ def _ranked_effects(
                 params,
                 unique_rms_increase_nt=unique.get(sc.name, 0.0),
                 step=sc.step,
-                intervals=_intervals(final.fit, k, final.residual_nt, train),
+                intervals=_intervals(
+                    shown,
+                    k,
+                    final.residual_nt,
+                    train,
+                    template_systematic(data, shown, k, train, robust=sel.robust)
+                    if k < len(shown.blocks)
+                    else None,
+                ),
                 shrink_interval=_shrink_interval(before_r, after_r, holdout, n_chunks),
                 absorbed_fraction=_absorbed_fraction(final.fit, k, train, cal_basis),
             )
