@@ -8,12 +8,16 @@ amplitude ``crust_scale`` -- worlds of :func:`orbitcal.simulate.simulate_world` 
 TLEs (4 orbits at 10 s, nadir and tumbling alternately, a random sensor) carry that one effect at a
 random size; the diagnosis runs blind (:func:`orbitcal.diagnose.diagnose_data`) and its 90 %
 interval for the effect (``EffectScore.intervals``) is compared with the injected value, expressed
-in the diagnosis' parameterisation: an effect injected before the sensor matrix ``A`` appears in
-sensor axes as ``A @ value`` (temperature offsets, couplings); the time offset's correction is minus
-the lateness of the tags and the crust is injected as the LCS-1 model the diagnosis is given, times
-the amplitude -- both seen through ``A``, so their truth is the injected sensor-unit field projected
-on the model's column (calibration columns projected out), a few per cent from the nominal value
-(``nominal`` in the JSON). Coverage = fraction of intervals holding the truth (target 85-95 %).
+in the diagnosis' parameterisation. The temperature offsets act inside the instrument there, so an
+offset injected before the sensor matrix ``A`` appears as ``A @ value``. The fields at the sensor
+(``orbitcal.diagnose.attribution.uncertainty.THROUGH_SENSOR``) are stated as seen through the
+fitted ``A`` (since 2026-11-26): the couplings are the injected ones; the time offset's correction
+(minus the lateness of the tags) and the crust (the LCS-1 model the diagnosis is given, times the
+amplitude) have as truth the injected sensor-unit field projected on ``A`` times the model's column
+(calibration columns projected out), within a few per cent of the nominal value (``nominal`` in
+the JSON). Before that date the stated values were those of the model's column without ``A`` and
+the truth was defined alike (``A @ value`` for the couplings, the column without ``A``).
+Coverage = fraction of intervals holding the truth (target 85-95 %).
 """
 
 from __future__ import annotations
@@ -88,14 +92,14 @@ def _world(kind: str, i: int, rng: np.random.Generator, tle_text: str) -> dict[s
     }[kind]
     score = next(e for e in att.effects if e.name == name)
     if kind in ("dt_s", "crust_scale"):
-        # The injected field in sensor units (through A), projected on the model's column with
-        # the 12 calibration columns projected out on the training samples: the value the
-        # diagnosis' parameterisation gives that field (A scales it by a few per cent).
+        # The injected field in sensor units (through A), projected on the model's column seen
+        # through A, with the 12 calibration columns projected out on the training samples: the
+        # value the diagnosis' parameterisation gives that field.
         from orbitcal.diagnose.attribution.uncertainty import _calibration_basis
 
         f = (sum(world.injected_body_nt.values()) @ a.T)[att.train]
         col = data.db_ref_body_dt_nt_s if kind == "dt_s" else data.b_crust_body_nt
-        g = np.asarray(col)[att.train]
+        g = np.asarray(col)[att.train] @ a.T  # the column as the sensor sees it
         basis = _calibration_basis(data, att.train)  # Q^T of a field, without forming Q
         qf, qg = basis.project(f), basis.project(g)
         value = float((np.sum(f * g) - qf @ qg) / (np.sum(g * g) - qg @ qg))
@@ -105,7 +109,7 @@ def _world(kind: str, i: int, rng: np.random.Generator, tle_text: str) -> dict[s
         t = a @ bias
         truth = {f"offset_{ax}_nt_per_degc": float(t[k]) for k, ax in enumerate("xyz")}
     elif kind == "coupling_nt_per_am2":
-        t = a @ coupling.reshape(3, 3)
+        t = coupling.reshape(3, 3)  # a torquer's field at the sensor, stated through A
         truth = {
             f"coupling_{'xyz'[r]}{'xyz'[c]}_nt_per_am2": float(t[r, c])
             for r in range(3)

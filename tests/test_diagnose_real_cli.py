@@ -207,3 +207,30 @@ def test_the_external_field_named_by_its_constant_when_its_trend_leaves_the_phys
     assert external["status"] == "selected" and external["implausible_reason"] is None
     assert {e["name"] for e in report["effects"] if e["significant"]} <= ALLOWED
     assert report["final"]["holdout_rms_nt"] < report["baseline"]["holdout_rms_nt"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("seed", "rate_deg_s"), [(3517, 1.0), (3522, 1.5)])
+def test_a_sun_driven_field_without_an_eclipse_is_not_named(
+    tmp_path: Path, seed: int, rate_deg_s: float
+) -> None:
+    # The pass is lit throughout and shorter than an orbit: the Sun-driven template's one
+    # signature (on when lit, off in eclipse) is absent, and what it draws is a field fixed in
+    # space, the ring current's among them. The report said so and still named it significant
+    # (3522: the verdict, "tentative"; 3517: withdrawn as overshadowed). Drawn after the rule was
+    # written: seeds 3500-3523, the two where it acts.
+    table, out = tmp_path / "pass.csv", tmp_path / "report.json"
+    _table(table, "tumbling", seed, rate_deg_s=rate_deg_s)
+    assert main(["diagnose", str(table), "--attitude-frame", "ITRS", "--out", str(out)]) == 0
+    report = json.loads(out.read_text())
+    sun = {e["name"]: e for e in report["effects"]}["sun_driven"]
+    assert report["honesty"]["unlit"] == ["sun_driven"]
+    assert sun["significant"] is False and sun["status"] == "unlit"
+    assert "no eclipse" in sun["unlit_reason"] and "external_field" in sun["unlit_reason"]
+    assert report["verdict"] != "sun_driven"
+    assert {e["name"] for e in report["effects"] if e["significant"]} <= ALLOWED
+    statement = report["gap"]["statement"]
+    assert "a field fixed in space" in statement and "external_field" in statement
+    refused = {c["name"]: c["refused_because"] for c in report["gap"]["closest_candidates"]}
+    assert refused.get("sun_driven", "not the Sun's").startswith("not the Sun's")
+    assert report["final"]["holdout_rms_nt"] <= report["baseline"]["holdout_rms_nt"] + 1e-9

@@ -98,6 +98,8 @@ def refusal(e: dict[str, Any]) -> str:
         return f"weak: {e.get('weak_reason')}"
     if e.get("status") == "wander":
         return f"within the noise's wander: {e.get('wander_reason')}"
+    if e.get("status") == "unlit":
+        return f"not the Sun's on this span: {e.get('unlit_reason')}"
     if e.get("status") == "possible residue":
         return str(e.get("residue_reason"))
     absorbed = e.get("absorbed_by_calibration_fraction")
@@ -199,6 +201,7 @@ def gap_section(
             f"{times:.1f} x the noise floor ({sigma:.3g} nT); no candidate explains it"
             + _lies(where.get("concentration"))
             + _wandering([e["name"] for e in report["effects"] if e.get("status") == "wander"])
+            + _fixed_in_space([e for e in report["effects"] if e.get("status") == "unlit"])
         )
     else:
         gap["statement"] = (
@@ -293,6 +296,26 @@ def _lies(concentration: object) -> str:
     if concentration == "eclipse":
         return "; it lies mostly in eclipse"
     return f"; it lies mostly at {concentration}"
+
+
+def _fixed_in_space(unlit: Sequence[dict[str, Any]]) -> str:
+    """The clause of a gap statement for a Sun-driven field withdrawn for want of an eclipse."""
+    if not unlit:
+        return ""
+    e = unlit[0]
+    before, after = e.get("holdout_rms_before_nt"), e.get("holdout_rms_after_nt")
+    took = (
+        f" (with {e['name']}'s template at its selection step the held-out residual went from "
+        f"{before:.3g} to {after:.3g} nT per component)"
+        if isinstance(before, float) and isinstance(after, float)
+        else ""
+    )
+    return (
+        f"; a field fixed in space may take up part of it{took}, as {e['name']}'s template "
+        "draws it, but without an eclipse on a span shorter than an orbit nothing says it comes "
+        "from the Sun: the ring current's field (external_field) is one such field; a "
+        "sunlit/eclipse cycle would decide"
+    )
 
 
 def _wandering(names: Sequence[str]) -> str:

@@ -69,7 +69,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from orbitcal.arrays import BoolArray, FloatArray
-from orbitcal.diagnose.confounding import confounding_words
+from orbitcal.diagnose.confounding import confounding_words, sun_driven_without_eclipse
 from orbitcal.diagnose.effects import effect_param_range
 from orbitcal.diagnose.extrapolation import extrapolation_words
 from orbitcal.diagnose.gap import (
@@ -135,6 +135,13 @@ LARGE_GAP_TIMES_NOISE = 10.0
 #: quiet latitudes, it withdrew real currents of compound worlds whose other effects the fits
 #: on quiet latitudes model imperfectly (plan seeds 192 and 251: 5 worlds).
 WEAK_CURRENTS_NT = 5.0
+#: Why a Sun-driven field is not named on a span shorter than an orbit without an eclipse.
+UNLIT_REASON = (
+    "the span has no eclipse and is shorter than an orbit: its template, a linear map of the Sun "
+    "direction switched off in eclipse, then draws a field fixed in space (the ring current's, "
+    "external_field, is one), so nothing here says it comes from the Sun; a sunlit/eclipse cycle "
+    "would decide"
+)
 #: Chunks of the held-out span and the one-sided level of the correlated-chunk check
 #: (:func:`_correlated`).
 CORRELATED_CHUNKS = 32
@@ -367,6 +374,7 @@ class Review:
     fell_back: bool
     final: _Final
     inseparable: list[str] = field(default_factory=list)
+    unlit: list[str] = field(default_factory=list)
     orphaned: list[str] = field(default_factory=list)
     overshadowed: list[str] = field(default_factory=list)
     immaterial: list[str] = field(default_factory=list)
@@ -383,7 +391,13 @@ def review(data: DiagnosisData, att: Attribution) -> Review:
     fit_names = _fit_names(att)
     residues: list[dict[str, Any]] = []
     inseparable = inseparable_selected(data, att, fit_names)
-    keep = [n for n in att.selected if n not in inseparable]
+    # A Sun-driven field without its one signature (no eclipse, shorter than an orbit) is a field
+    # fixed in space: the span cannot name the Sun as its cause (fresh storm-pass draws named it
+    # beside or instead of the external field in 6 of 80 while saying exactly that).
+    unlit = [
+        n for n in att.selected if n not in inseparable and sun_driven_without_eclipse(data, att, n)
+    ]
+    keep = [n for n in att.selected if n not in inseparable and n not in unlit]
     steps = {e.name: e.step for e in att.effects if e.significant}
     test_holdout, test_train = att.holdout, att.train
     # Beside auroral currents the attribution already judged every other effect on quiet
@@ -480,6 +494,7 @@ def review(data: DiagnosisData, att: Attribution) -> Review:
         fell_back,
         final,
         inseparable=inseparable,
+        unlit=unlit,
         orphaned=orphaned,
         overshadowed=overshadowed,
         immaterial=immaterial,
@@ -817,6 +832,7 @@ def _mark_withdrawn(report: dict[str, Any], att: Attribution, rv: Review) -> Non
             "what it takes may be what the others' templates miss",
         )
     _withdraw(by_name, rv.inseparable, "inseparable")
+    _withdraw(by_name, rv.unlit, "unlit", "unlit_reason", UNLIT_REASON)
     for name in inseparable_candidates(att):
         e = by_name[name]
         e["inseparable"] = True
@@ -918,6 +934,7 @@ def _honesty_section(rv: Review) -> dict[str, Any]:
         "residue_tests": rv.residues,
         "possible_residue": [r["effect"] for r in rv.residues if r["possible_residue"]],
         "inseparable": list(rv.inseparable),
+        "unlit": list(rv.unlit),
         "orphaned": list(rv.orphaned),
         "overshadowed": list(rv.overshadowed),
         "immaterial": list(rv.immaterial),
