@@ -4,7 +4,8 @@ the verdict (``report["confounded_with"]``), with what would decide.
 
 Under a spin about one axis a field fixed in space (a ring current) is a Sun-driven field's matrix
 times the Sun direction; on a span shorter than an orbit with no eclipse (the real Swarm storm pass
-is lit throughout) that holds for every attitude, and a Sun-driven verdict is tentative.
+is lit throughout) a Sun-driven field is a field fixed in space for every attitude, and the review
+withdraws it (``status: "unlit"``, :func:`sun_driven_without_eclipse`).
 :mod:`orbitcal.diagnose.honesty` calls :func:`confounding_words` on the reviewed report.
 """
 
@@ -162,9 +163,9 @@ def confounding_words(
 
 
 def sun_driven_without_eclipse(data: DiagnosisData, att: Attribution, verdict: str) -> bool:
-    """A Sun-driven verdict on a span shorter than an orbit without a sample in eclipse: the
-    Sun direction is fixed in space over it, and the template's one signature of the Sun (on when
-    lit, off in eclipse) is absent from the data."""
+    """``verdict`` (an effect's name) is a Sun-driven field on a span shorter than an orbit
+    without a sample in eclipse: the Sun direction is fixed in space over it, and the template's
+    one signature of the Sun (on when lit, off in eclipse) is absent from the data."""
     if verdict != "sun_driven" or att.span_s >= ORBIT_S:
         return False
     lit = (

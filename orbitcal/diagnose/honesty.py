@@ -33,8 +33,11 @@ against the same held-out data, and says so where a claim does not hold:
 * **Confounded.** A candidate that draws the verdict's own field (beyond the calibration) on this
   span and explains the held-out residual nearly as well is named beside the verdict, with what
   would decide (:mod:`orbitcal.diagnose.confounding`): under a spin about one axis a field fixed
-  in space is a Sun-driven field's matrix times the Sun direction. A Sun-driven verdict on an
-  all-sunlit span shorter than an orbit always names the external field so, and is tentative.
+  in space is a Sun-driven field's matrix times the Sun direction.
+* **Unlit.** On an all-sunlit span shorter than an orbit a Sun-driven field lacks its one
+  signature (off in eclipse) and is any field fixed in space, the external field's among them: it
+  is withdrawn (``status: "unlit"``), and the gap says what the template took and what would
+  decide (:func:`orbitcal.diagnose.confounding.sun_driven_without_eclipse`).
 * **The calibration's own extrapolation.** On a span shorter than an orbit, a gap of which most
   goes when the 12 parameters are fitted with the held-out blocks too is the calibration's own
   extrapolation error: the report says it cannot be separated from the calibration on this span
