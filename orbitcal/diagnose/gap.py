@@ -220,12 +220,16 @@ def verdict_status(
     (:func:`orbitcal.diagnose.honesty.absorbed_candidates`); ``own_test``: the effects judged on
     their own latitudes (auroral currents)."""
     gap = report["gap"]
+    one = len(absorbed) == 1
     unseen = (
         "; the calibration takes up "
         + ", ".join(absorbed)
-        + f" whole on this span (>= {INSEPARABLE_LIMIT:.0%} of each one's fitted field is a "
-        "change of the 12 parameters): if present, they cannot be separated from the "
-        "calibration on this span; what would decide: " + deciders(absorbed)
+        + f" whole on this span (>= {INSEPARABLE_LIMIT:.0%} of "
+        + ("its" if one else "each one's")
+        + " fitted field is a change of the 12 parameters): if present, "
+        + ("it cannot" if one else "they cannot")
+        + " be separated from the calibration on this span; what would decide: "
+        + deciders(absorbed)
         if absorbed and not gap["inseparable"]
         else ""
     )
