@@ -23,7 +23,12 @@ from orbitcal.diagnose.prior import CalibrationPrior
 from orbitcal.diagnose.track import along_track
 from orbitcal.geomag import dipole_axis_itrs, magnetic_latitude_deg
 
-__all__ = ["FIELD_SCALE_NT", "SECONDS_PER_DAY", "DiagnosisData"]
+#: Roughly one LEO revolution [s]; a shorter span is "short" (re-exported by
+#: :mod:`orbitcal.diagnose.span_options`; here so that the designs can use it without importing
+#: the attribution that module's ``choose_options`` calls).
+ORBIT_S = 5400.0
+
+__all__ = ["FIELD_SCALE_NT", "ORBIT_S", "SECONDS_PER_DAY", "DiagnosisData"]
 
 
 #: Earth rotation rate about the ITRS z axis [rad/s] (IERS nominal).

@@ -29,11 +29,11 @@ from orbitcal.diagnose.columns import (
 )
 from orbitcal.diagnose.data import (
     FIELD_SCALE_NT,
+    ORBIT_S,
     SECONDS_PER_DAY,
     DiagnosisData,
     _time_derivative,
 )
-from orbitcal.diagnose.span_options import ORBIT_S
 
 __all__ = ["DesignBlock", "DesignFn"]
 

@@ -28,13 +28,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from orbitcal.diagnose.data import ORBIT_S
+
 if TYPE_CHECKING:  # pragma: no cover
     from orbitcal.diagnose.effects import DiagnosisData
 
 __all__ = ["ORBIT_S", "QUIET_MLAT_DEG", "SHORT_SPAN_HOLDOUT_BLOCKS", "choose_options"]
 
-#: Roughly one LEO revolution [s]; a shorter span is "short".
-ORBIT_S = 5400.0
 #: Held-out blocks (of :data:`orbitcal.diagnose.attribution.N_BLOCKS`) on a short span.
 SHORT_SPAN_HOLDOUT_BLOCKS = 2
 #: Fits use |magnetic latitude| below this when auroral currents are found [deg].
