@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import h5py
 import numpy as np
@@ -74,15 +75,21 @@ def _table(path: Path, kind: str, seed: int, rate_deg_s: float = 1.0) -> None:
     np.savetxt(path, cols, delimiter=",", header=header, comments="", fmt="%.17g")
 
 
+def _diagnosed(tmp_path: Path, kind: str, seed: int, rate_deg_s: float = 1.0) -> dict[str, Any]:
+    """``orbitcal diagnose``'s report (defaults, no prior) on the pass through draw ``seed``."""
+    table, out = tmp_path / "pass.csv", tmp_path / "report.json"
+    _table(table, kind, seed, rate_deg_s)
+    assert main(["diagnose", str(table), "--attitude-frame", "ITRS", "--out", str(out)]) == 0
+    report: dict[str, Any] = json.loads(out.read_text())
+    return report
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize(
     ("kind", "seed"), [("tumbling", 3101), ("tumbling", 3102), ("nadir", 3201), ("nadir", 3202)]
 )
 def test_the_storm_pass_through_the_command_line(tmp_path: Path, kind: str, seed: int) -> None:
-    table, out = tmp_path / "pass.csv", tmp_path / "report.json"
-    _table(table, kind, seed)
-    assert main(["diagnose", str(table), "--attitude-frame", "ITRS", "--out", str(out)]) == 0
-    report = json.loads(out.read_text())
+    report = _diagnosed(tmp_path, kind, seed)
     status = report["verdict_status"]
     significant = {e["name"] for e in report["effects"] if e["significant"]}
     assert significant <= ALLOWED, status
@@ -124,10 +131,7 @@ def test_a_small_gain_beside_a_large_gap_is_not_named(
     # A slow tumble (0.3 deg/s: half a turn in the 30 minutes): the held-out residual stays
     # 50-100 x the noise floor whatever is fitted, and a flexible effect that removes a few per
     # cent of it was named (drawn after the rule was written: seeds 3300-3329, the two it acts on).
-    table, out = tmp_path / "pass.csv", tmp_path / "report.json"
-    _table(table, "tumbling", seed, rate_deg_s=0.3)
-    assert main(["diagnose", str(table), "--attitude-frame", "ITRS", "--out", str(out)]) == 0
-    report = json.loads(out.read_text())
+    report = _diagnosed(tmp_path, "tumbling", seed, rate_deg_s=0.3)
     by_name = {e["name"]: e for e in report["effects"]}
     if status == "immaterial":
         assert report["honesty"]["immaterial"] == [small]
@@ -150,10 +154,7 @@ def test_a_time_offset_beside_the_external_field_on_a_short_span_is_a_possible_r
     # On a span shorter than an orbit a time shift bends any smooth misfit a little: beside the
     # external field it must explain what an imperfect model of the field cannot (the residue
     # test). Drawn after the rule was written (seeds 3300-3329 at 0.3 deg/s).
-    table, out = tmp_path / "pass.csv", tmp_path / "report.json"
-    _table(table, "tumbling", 3316, rate_deg_s=0.3)
-    assert main(["diagnose", str(table), "--attitude-frame", "ITRS", "--out", str(out)]) == 0
-    report = json.loads(out.read_text())
+    report = _diagnosed(tmp_path, "tumbling", 3316, rate_deg_s=0.3)
     residues = {r["effect"] for r in report["honesty"]["residue_tests"] if r["possible_residue"]}
     assert "time_offset" in residues
     assert report["verdict"] == "external_field"
@@ -168,10 +169,7 @@ def test_a_gap_the_calibration_extrapolation_makes_is_said_to_be_inseparable(
     # A slow tumble: the 12 parameters fitted on the first 80 % extrapolate badly; fitted with
     # the held-out blocks too they remove most of the held-out residual. The report says the gap
     # cannot be separated from the calibration on this span, with the closest candidates.
-    table, out = tmp_path / "pass.csv", tmp_path / "report.json"
-    _table(table, "tumbling", seed, rate_deg_s=0.3)
-    assert main(["diagnose", str(table), "--attitude-frame", "ITRS", "--out", str(out)]) == 0
-    report = json.loads(out.read_text())
+    report = _diagnosed(tmp_path, "tumbling", seed, rate_deg_s=0.3)
     extrapolation = report["gap"]["calibration_extrapolation"]
     assert extrapolation["share_of_holdout_mean_square"] >= 0.5
     assert extrapolation["holdout_rms_refit_nt"] < report["gap"]["holdout_rms_nt"]
@@ -197,10 +195,7 @@ def test_the_external_field_named_by_its_constant_when_its_trend_leaves_the_phys
     # are tried first now (3404 drawn after the rule was written: seeds 3400-3411 at 1 deg/s
     # changed the chosen form in 3 of 12, and this is the one at 2.5 deg/s whose verdict moved;
     # 3320 is an earlier test's draw, held-out 157 -> 72 nT with the constant).
-    table, out = tmp_path / "pass.csv", tmp_path / "report.json"
-    _table(table, "tumbling", seed, rate_deg_s=rate_deg_s)
-    assert main(["diagnose", str(table), "--attitude-frame", "ITRS", "--out", str(out)]) == 0
-    report = json.loads(out.read_text())
+    report = _diagnosed(tmp_path, "tumbling", seed, rate_deg_s=rate_deg_s)
     by_name = {e["name"]: e for e in report["effects"]}
     external = by_name["external_field"]
     assert report["verdict"] == "external_field", report["verdict_status"]
@@ -219,10 +214,7 @@ def test_a_sun_driven_field_without_an_eclipse_is_not_named(
     # space, the ring current's among them. The report said so and still named it significant
     # (3522: the verdict, "tentative"; 3517: withdrawn as overshadowed). Drawn after the rule was
     # written: seeds 3500-3523, the two where it acts.
-    table, out = tmp_path / "pass.csv", tmp_path / "report.json"
-    _table(table, "tumbling", seed, rate_deg_s=rate_deg_s)
-    assert main(["diagnose", str(table), "--attitude-frame", "ITRS", "--out", str(out)]) == 0
-    report = json.loads(out.read_text())
+    report = _diagnosed(tmp_path, "tumbling", seed, rate_deg_s=rate_deg_s)
     sun = {e["name"]: e for e in report["effects"]}["sun_driven"]
     assert report["honesty"]["unlit"] == ["sun_driven"]
     assert sun["significant"] is False and sun["status"] == "unlit"

@@ -220,16 +220,8 @@ def verdict_status(
     (:func:`orbitcal.diagnose.honesty.absorbed_candidates`); ``own_test``: the effects judged on
     their own latitudes (auroral currents)."""
     gap = report["gap"]
-    one = len(absorbed) == 1
     unseen = (
-        "; the calibration takes up "
-        + ", ".join(absorbed)
-        + f" whole on this span (>= {INSEPARABLE_LIMIT:.0%} of "
-        + ("its" if one else "each one's")
-        + " fitted field is a change of the 12 parameters): if present, "
-        + ("it cannot" if one else "they cannot")
-        + " be separated from the calibration on this span; what would decide: "
-        + deciders(absorbed)
+        _taken_whole(absorbed) + "; what would decide: " + deciders(absorbed)
         if absorbed and not gap["inseparable"]
         else ""
     )
@@ -237,17 +229,7 @@ def verdict_status(
     # up so whole that they shrink nothing (a uniform external field under nadir pointing is a
     # change of scale): unseen as well, and said so.
     rest = [n for n in absorbed if n not in gap["inseparable"]]
-    also = (
-        "; the calibration also takes up "
-        + ", ".join(rest)
-        + f" whole on this span (>= {INSEPARABLE_LIMIT:.0%} of "
-        + ("its" if len(rest) == 1 else "each one's")
-        + " fitted field is a change of the 12 parameters): if present, "
-        + ("it cannot" if len(rest) == 1 else "they cannot")
-        + " be separated from the calibration on this span either"
-        if rest and gap["inseparable"]
-        else ""
-    )
+    also = _taken_whole(rest, also=True) if rest and gap["inseparable"] else ""
     separation = {s["effect"]: s for s in report.get("separation") or []}
     verdict = report["verdict"]
     report["separable"] = None if verdict == "none" else verdict not in separation
@@ -287,6 +269,18 @@ def verdict_status(
             f"parameters); what would separate it: {separation[verdict]['would_separate']}"
         )
         report["verdict_confidence_of"] = "presence"
+
+
+def _taken_whole(names: Sequence[str], *, also: bool = False) -> str:
+    """The clause saying that the calibration takes up ``names`` whole on this span."""
+    one = len(names) == 1
+    whose, who = ("its", "it") if one else ("each one's", "they")
+    return (
+        f"; the calibration {'also ' if also else ''}takes up {', '.join(names)} whole on this "
+        f"span (>= {INSEPARABLE_LIMIT:.0%} of {whose} fitted field is a change of the 12 "
+        f"parameters): if present, {who} cannot be separated from the calibration on this span"
+        + (" either" if also else "")
+    )
 
 
 def _lies(concentration: object) -> str:

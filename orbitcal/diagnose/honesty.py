@@ -180,10 +180,6 @@ class ResidueResult:
         return 1.0 - self.holdout_rms_with_nt / max(self.holdout_rms_others_nt, 1e-12)
 
 
-def _time_derivative(t_s: FloatArray, x: FloatArray) -> FloatArray:
-    return np.asarray(np.gradient(x, t_s, axis=0)) if t_s.size > 2 else np.zeros_like(x)
-
-
 def residue_test(
     data: DiagnosisData,
     fit: JointFit,
@@ -202,20 +198,18 @@ def residue_test(
     ``f_k[:, i]`` added. Both are judged on the held-out samples in :data:`RESIDUE_CHUNKS`
     consecutive chunks (one-sided signed-rank test of the log ratio of their mean squares).
     """
-    t = data.t_utc_s
+    from orbitcal.diagnose.attribution.uncertainty import imperfect_model
+
     full = fit.predict_nt(data)
     own = fit.effect_nt(k)
     y = data.b_raw_nt - (full - own)  # the joint model's residual without block k
-    span = float(t[-1] - t[0]) or 1.0
-    tau = ((t - t[0]) / span - 0.5)[:, None]
-    others = [fit.effect_nt(j) for j in range(len(fit.blocks)) if j != k]
-    nuisance_axes: list[FloatArray] = []
-    for i in range(3):
-        cols = [data.b_ref_body_nt, np.ones((data.n, 1))]
-        for f in others:
-            fi = f[:, i : i + 1]
-            cols += [fi, tau * fi, _time_derivative(t, fi)]
-        nuisance_axes.append(np.column_stack(cols))
+    kinds = imperfect_model(
+        data.t_utc_s, [fit.effect_nt(j) for j in range(len(fit.blocks)) if j != k]
+    )
+    nuisance_axes = [
+        np.column_stack([data.b_ref_body_nt, np.ones((data.n, 1)), *(x[:, i] for x in kinds)])
+        for i in range(3)
+    ]
     r_without = np.empty_like(y)
     r_with = np.empty_like(y)
     for i in range(3):

@@ -202,7 +202,7 @@ def _ranked_effects(
     shown = through_sensor(data, final.fit, train, robust=sel.robust)
     effects: list[EffectScore] = []
     for k, sc in enumerate(step_scores):
-        params = _params(shown, k) if k < len(shown.blocks) else _params(final.fit, k)
+        params = _params(shown, k)  # final joint values, fields at the sensor through A
         if sc.name in indistinguishable:
             params["indistinguishable_from"] = indistinguishable[sc.name]
         before_r, after_r = step_residuals[k]
@@ -221,9 +221,7 @@ def _ranked_effects(
                     k,
                     final.residual_nt,
                     train,
-                    template_systematic(data, shown, k, train, robust=sel.robust)
-                    if k < len(shown.blocks)
-                    else None,
+                    template_systematic(data, shown, k, train, robust=sel.robust),
                 ),
                 shrink_interval=_shrink_interval(before_r, after_r, holdout, n_chunks),
                 absorbed_fraction=_absorbed_fraction(final.fit, k, train, cal_basis),

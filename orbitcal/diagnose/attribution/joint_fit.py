@@ -542,19 +542,41 @@ def _out_of_range(
     *,
     robust: bool,
 ) -> bool:
-    """``form`` fits the training samples only with a parameter outside its physical range: its
-    bounded fit sits on an edge, the free fit leaves the range (:func:`outside_range`) and
-    predicts the training samples otherwise (the test of ``Selection.implausible_reason``)."""
-    k = len(fixed)
+    """``form`` fits the training samples only with a parameter outside its physical range
+    (:func:`leaves_range` of its bounded fit beside ``fixed``)."""
     fit = fit_joint(data, train, [*fixed, form], robust=robust)
-    if not fit.at_bounds(k):
-        return False
-    free = fit_joint(data, train, [*fixed, form], robust=robust, bounded=False)
     r_fit = data.b_raw_nt - fit.predict_nt(data)
+    return leaves_range(data, train, fit, r_fit, robust=robust) is not None
+
+
+def leaves_range(
+    data: DiagnosisData,
+    train: BoolArray,
+    fit: JointFit,
+    r_fit: FloatArray,
+    *,
+    robust: bool,
+    blocks: Sequence[DesignBlock] | None = None,
+) -> tuple[JointFit, FloatArray, list[str]] | None:
+    """The free (unbounded) refit of a bounded ``fit`` whose last block sits on the edge of a
+    physical range, its residual and the parameters it puts outside their ranges
+    (:func:`outside_range`); None when the last block is inside its ranges, when the free fit
+    predicts the training samples as the bounded one does (the range costs nothing: the data
+    leave that direction open), or when no parameter is outside. ``blocks``: those refitted
+    freely (default ``fit``'s own). The test of ``Selection.implausible_reason`` and of the
+    choice among an effect's forms."""
+    k = len(fit.blocks) - 1
+    if not fit.at_bounds(k):
+        return None
+    # The variant the bounded fit chose, refitted freely (no new choice among variants).
+    free = fit_joint(
+        data, train, fit.blocks if blocks is None else blocks, robust=robust, bounded=False
+    )
     r_free = data.b_raw_nt - free.predict_nt(data)
     if _twins(free, r_free, fit, r_fit, train):
-        return False  # the range costs nothing: the data leave that direction open
-    return bool(outside_range(free, k))
+        return None
+    outside = outside_range(free, k)
+    return (free, r_free, outside) if outside else None
 
 
 def _plausible(

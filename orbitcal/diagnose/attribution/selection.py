@@ -19,7 +19,7 @@ from orbitcal.diagnose.attribution.joint_fit import (
     _resolve,
     _twins,
     fit_joint,
-    outside_range,
+    leaves_range,
 )
 from orbitcal.diagnose.attribution.significance import _chunk_test, _support
 from orbitcal.diagnose.attribution.uncertainty import _autocorr_inflation
@@ -248,18 +248,20 @@ class Selection:
         the data only with unphysical values, whether or not its edge-of-range fit passes the
         held-out test.
         """
-        fit = cand.fit
-        if not fit.at_bounds(len(fit.blocks) - 1):
+        found = leaves_range(
+            self.data,
+            self.train,
+            cand.fit,
+            cand.residual_nt,
+            robust=self.robust,
+            blocks=[*fixed, cand.block],
+        )
+        if found is None:
             return None
-        # The variant the bounded fit chose, refitted freely (no new choice among variants).
-        free, r_free, rms_free = self.fit([*fixed, cand.block], bounded=False)
-        if _twins(free, r_free, fit, cand.residual_nt, self.train):
-            return None  # the range costs nothing: the data leave that direction open
+        free, r_free, outside = found
+        rms_free = norm_rms_nt(r_free[self.holdout])
         p_free, gains_free = self.judge(free, r_free, r_before, rms_free, rms_before)
         wins = p_free < level and gains_free
-        outside = outside_range(free, len(free.blocks) - 1)
-        if not outside:
-            return None
         how = "wins only by leaving" if wins else "its fit runs out of"
         return (
             f"{how} its physical range: "
