@@ -36,6 +36,14 @@ def chromium_path() -> str:
     return path
 
 
+#: CDP errors of a page that is navigating: no context to evaluate in yet, not a failure.
+NAVIGATING = (
+    "Inspected target navigated or closed",
+    "Cannot find context with specified id",
+    "Execution context was destroyed",
+)
+
+
 class CdpError(RuntimeError):
     """A DevTools command answered an error, or the browser went away."""
 
@@ -175,7 +183,14 @@ class Browser:
         deadline = time.monotonic() + timeout_s
         guarded = f"(() => {{ try {{ return ({expression}); }} catch (e) {{ return null; }} }})()"
         while True:
-            value = self.evaluate(guarded)  # null while the page is still loading
+            try:
+                value = self.evaluate(guarded)  # null while the page is still loading
+            except CdpError as exc:
+                # Asked between a reload's unloading and the new document's context (CI at
+                # 1544911: "Inspected target navigated or closed" right after location.reload()).
+                if not any(m in str(exc) for m in NAVIGATING):
+                    raise
+                value = None
             if value:
                 return value
             if time.monotonic() > deadline:
