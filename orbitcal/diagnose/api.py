@@ -247,5 +247,7 @@ def _with_learned_crust(
     if summary["stage_chosen"] == "none":
         return data, summary
     summary["candidate"] = f"crustal_field ({LEARNED_CRUST})"
-    replaced = dataclasses.replace(data, b_crust_body_nt=correction, crust_model=LEARNED_CRUST)
+    replaced = dataclasses.replace(
+        data, b_crust_body_nt=correction, b_crust_low_body_nt=None, crust_model=LEARNED_CRUST
+    )
     return replaced, summary

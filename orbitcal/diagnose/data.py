@@ -127,6 +127,10 @@ class DiagnosisData:
         Ring-current (RC) index interpolated at the sample times [nT].
     b_crust_body_nt : ndarray, shape (N, 3), optional
         A crustal field model at the samples, body frame [nT].
+    b_crust_low_body_nt : ndarray, shape (N, 3), optional
+        The part of ``b_crust_body_nt`` of its lowest degrees (to
+        :data:`orbitcal.diagnose.prepare.CRUST_LOW_BAND_NMAX`), where the crust's spectrum meets
+        the core's [nT].
     crust_model : str, optional
         Name of that crustal model (e.g. ``"LCS-1"``).
     reference_field : str
@@ -157,6 +161,7 @@ class DiagnosisData:
     sun_body: FloatArray | None = None
     rc_index_nt: FloatArray | None = None
     b_crust_body_nt: FloatArray | None = None
+    b_crust_low_body_nt: FloatArray | None = None
     crust_model: str | None = None
     reference_field: str = "IGRF-14"
     illumination: FloatArray | None = None
@@ -199,6 +204,7 @@ class DiagnosisData:
             sun_body=pick(self.sun_body),  # type: ignore[arg-type]
             rc_index_nt=pick(self.rc_index_nt),  # type: ignore[arg-type]
             b_crust_body_nt=pick(self.b_crust_body_nt),  # type: ignore[arg-type]
+            b_crust_low_body_nt=pick(self.b_crust_low_body_nt),  # type: ignore[arg-type]
             crust_model=self.crust_model,
             reference_field=self.reference_field,
             illumination=pick(self.illumination),  # type: ignore[arg-type]

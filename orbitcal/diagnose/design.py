@@ -408,10 +408,30 @@ def _field_power(b_nt: FloatArray, power: int, index: Index) -> FloatArray:
 
 
 def _design_crustal(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
+    """The crustal model scaled; where it has degrees at and below
+    :data:`~orbitcal.diagnose.prepare.CRUST_LOW_BAND_NMAX` above the main field's, the form
+    ``bands`` scales them apart (``crust_low_degrees_scale``; ``crust_scale`` then scales the
+    degrees above). There the crust's spectrum meets the core's: the residual of a degree-13
+    main field holds the core's small scales too, and models disagree on those degrees (CHAOS
+    counts them as core, its crust starts at degree 21). Independent worlds whose crust was
+    CHAOS-7's (degrees 21-185) fitted LCS-1 (degrees 14-185) at 0.3-0.66 x their scale of 1-2
+    and left it unnamed; LCS-1's degrees 21+ alone correlate 0.84 with it, its degrees 14+
+    0.60."""
     if data.b_crust_body_nt is None:
         return None
+    variant = data.crust_model or "model"
+    low = data.b_crust_low_body_nt
+    bands: tuple[DesignBlock, ...] = ()
+    if low is not None and float(np.max(np.abs(low))) > 0.0:
+        bands = (
+            DesignBlock(
+                np.stack([data.b_crust_body_nt - low, low], axis=2),
+                ["crust_scale", "crust_low_degrees_scale"],
+                variant=f"{variant} bands",
+            ),
+        )
     return DesignBlock(
-        data.b_crust_body_nt[:, :, None], ["crust_scale"], variant=data.crust_model or "model"
+        data.b_crust_body_nt[:, :, None], ["crust_scale"], variant=variant, alternatives=bands
     )
 
 

@@ -386,6 +386,17 @@ CATALOGUE: tuple[Effect, ...] = (
                 "crust_scale",
                 ParamRange(0.3, 3.0, "amplitude of a published crustal model, near 1", 1.0, 0.5),
             ),
+            (
+                "crust_low_degrees_scale",
+                ParamRange(
+                    -1.0,
+                    3.0,
+                    "a crustal model's degrees up to 20, where the core's small scales are as "
+                    "large and the models disagree: near 1, perhaps absent",
+                    1.0,
+                    1.0,
+                ),
+            ),
         ),
     ),
     Effect(

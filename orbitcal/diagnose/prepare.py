@@ -23,11 +23,13 @@ from orbitcal.diagnose.track import along_track
 from orbitcal.errors import BadInputError, NotEnoughDataError
 
 if TYPE_CHECKING:  # pragma: no cover
+    from orbitcal.field._base import SphericalHarmonicModel
     from orbitcal.orbit import Propagator
     from orbitcal.telemetry import Telemetry
 
 __all__ = [
     "CRUST_KNOT_SPACING_S",
+    "CRUST_LOW_BAND_NMAX",
     "DEFAULT_CRUST_MODEL",
     "diagnosis_data",
     "field_body_nt",
@@ -119,6 +121,25 @@ def main_field_nmax(field_name: str) -> int:
     return max(degrees, default=0)
 
 
+#: The crustal candidate's degrees up to this one are also fitted on their own scale (the
+#: ``bands`` form of :func:`orbitcal.diagnose.design.design_crustal`): there the lithospheric
+#: spectrum meets the core's (they cross near degree 14), so a main field of degree 13 leaves
+#: the core's small scales beside the crust's, and the models disagree on those degrees (CHAOS
+#: counts them as core, to degree 20; its crust starts at 21). At 460 km LCS-1's degrees 14..20
+#: are 1.5 nT rms of its 2.2 above degree 13.
+CRUST_LOW_BAND_NMAX = 20
+
+
+def _model_itrs_nt(
+    model: SphericalHarmonicModel, t: FloatArray, r_itrs_km: FloatArray
+) -> FloatArray:
+    """A spherical-harmonic model's field at ITRS positions, ITRS components [nT]."""
+    from orbitcal import frames
+
+    radius, colat, lon = frames.itrs_to_spherical(r_itrs_km)
+    return np.asarray(frames.nec_to_itrs(model.b_nec_nt(t, radius, colat, lon), r_itrs_km))
+
+
 def crust_body_nt(
     crust_model: str, reference_field: str, t: FloatArray, r_itrs_km: FloatArray, rot: FloatArray
 ) -> FloatArray | None:
@@ -126,23 +147,34 @@ def crust_body_nt(
     field's main-field degree (:func:`orbitcal.field.crust.crustal_field_above`), evaluated at
     most :data:`CRUST_KNOT_SPACING_S` apart along the track; None (with a warning) for a model
     that is not a crustal model of the catalogue or cannot be evaluated."""
-    from orbitcal import frames
-    from orbitcal.field.crust import CRUSTAL_MODELS, crustal_field_above
+    bands = crust_bands_body_nt(crust_model, reference_field, t, r_itrs_km, rot)
+    return None if bands is None else bands[0]
+
+
+def crust_bands_body_nt(
+    crust_model: str, reference_field: str, t: FloatArray, r_itrs_km: FloatArray, rot: FloatArray
+) -> tuple[FloatArray, FloatArray | None] | None:
+    """:func:`crust_body_nt` and its part of degrees up to :data:`CRUST_LOW_BAND_NMAX` (None when
+    the model has none there above the main field's degree, or is not a crustal model of the
+    catalogue) [nT], (N, 3) each."""
+    from orbitcal.field.crust import CRUSTAL_MODELS, crustal_field, crustal_field_above
 
     if crust_model not in CRUSTAL_MODELS:
-        return field_body_nt(crust_model, t, r_itrs_km, rot, knot_spacing_s=CRUST_KNOT_SPACING_S)
-    model = crustal_field_above(crust_model, main_field_nmax(reference_field) + 1)
-
-    def itrs(tt: FloatArray, rr: FloatArray) -> FloatArray:
-        radius, colat, lon = frames.itrs_to_spherical(rr)
-        return np.asarray(frames.nec_to_itrs(model.b_nec_nt(tt, radius, colat, lon), rr))
-
-    try:
-        b_itrs = along_track(itrs, t, r_itrs_km, CRUST_KNOT_SPACING_S)
-    except ValueError as exc:  # pragma: no cover - a static model has no span to leave
-        warnings.warn(f"{crust_model} not used as a candidate regressor: {exc}", stacklevel=3)
-        return None
-    return np.asarray(np.einsum("nij,nj->ni", rot, b_itrs))
+        whole = field_body_nt(crust_model, t, r_itrs_km, rot, knot_spacing_s=CRUST_KNOT_SPACING_S)
+        return None if whole is None else (whole, None)
+    nmin = main_field_nmax(reference_field) + 1
+    models = [crustal_field_above(crust_model, nmin)]
+    if max(nmin, crustal_field(crust_model).nmin) <= CRUST_LOW_BAND_NMAX < models[0].nmax:
+        models.append(crustal_field_above(crust_model, nmin, CRUST_LOW_BAND_NMAX))
+    out: list[FloatArray] = []
+    for model in models:
+        try:
+            b_itrs = along_track(partial(_model_itrs_nt, model), t, r_itrs_km, CRUST_KNOT_SPACING_S)
+        except ValueError as exc:  # pragma: no cover - a static model has no span to leave
+            warnings.warn(f"{crust_model} not used as a candidate regressor: {exc}", stacklevel=3)
+            return None
+        out.append(np.asarray(np.einsum("nij,nj->ni", rot, b_itrs)))
+    return out[0], (out[1] if len(out) > 1 else None)
 
 
 def diagnosis_data(
@@ -191,9 +223,8 @@ def diagnosis_data(
     illumination, sun_body = _sun_in_body(t, r_itrs, rot)
     x_hk, names = _housekeeping(telemetry)
     rc_index, b_ext_body = _ring_current(t, r_itrs, rot) if options.external_model else (None, None)
-    b_crust_body = (
-        crust_body_nt(crust_model, options.field, t, r_itrs, rot) if crust_model else None
-    )
+    bands = crust_bands_body_nt(crust_model, options.field, t, r_itrs, rot) if crust_model else None
+    b_crust_body, b_crust_low_body = (None, None) if bands is None else bands
     return DiagnosisData(
         t_utc_s=t,
         b_raw_nt=np.asarray(telemetry.b_raw_nt, dtype=float),
@@ -206,6 +237,7 @@ def diagnosis_data(
         sun_body=sun_body,
         rc_index_nt=rc_index,
         b_crust_body_nt=b_crust_body,
+        b_crust_low_body_nt=b_crust_low_body,
         crust_model=crust_model if b_crust_body is not None else None,
         reference_field=truth.field_name,
         illumination=illumination,

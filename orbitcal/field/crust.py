@@ -53,8 +53,9 @@ def crustal_field(name: str) -> SphericalHarmonicModel:
 
 
 @lru_cache(maxsize=8)
-def crustal_field_above(name: str, nmin: int) -> SphericalHarmonicModel:
-    """The crustal model ``name`` from degree ``nmin`` on (its own lowest degree if higher).
+def crustal_field_above(name: str, nmin: int, nmax: int | None = None) -> SphericalHarmonicModel:
+    """The crustal model ``name`` from degree ``nmin`` on (its own lowest degree if higher), up to
+    degree ``nmax`` (its own highest by default).
 
     A main-field model of degree ``N`` (IGRF: 13, CHAOS core: 20) is fitted to the whole internal
     field up to ``N``, the lithosphere's long wavelengths included: what a crustal model adds to
@@ -62,13 +63,15 @@ def crustal_field_above(name: str, nmin: int) -> SphericalHarmonicModel:
     of its 2.1) are already in IGRF.
     """
     model = crustal_field(name)
-    if nmin <= model.nmin:
+    top = model.nmax if nmax is None else min(int(nmax), model.nmax)
+    if nmin <= model.nmin and top == model.nmax:
         return model
+    low = max(nmin, model.nmin)
     return SphericalHarmonicModel(
-        f"{name} (n >= {nmin})",
-        nmin=nmin,
-        nmax=model.nmax,
+        f"{name} (n >= {low})" if top == model.nmax else f"{name} (n = {low}..{top})",
+        nmin=low,
+        nmax=top,
         breaks_mjd2000=model.breaks_mjd2000,
-        coeffs_pp_flat=model.coeffs_pp_flat,
+        coeffs_pp_flat=model.coeffs_pp_flat[:, :, : top * (top + 2)],
         static=True,
     )
