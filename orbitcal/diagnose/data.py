@@ -145,6 +145,10 @@ class DiagnosisData:
     positions_measured : bool
         True when positions come with the telemetry (GNSS, metre-level): orbit_error, which models
         the along-track error of a propagated element set, is then no candidate.
+    element_age_days : float, optional
+        Days from the epoch of the element set the positions were propagated from to the middle
+        of the data (None for measured positions or an unknown epoch): an older set's orbit
+        error may be larger.
     reference_fn : callable, optional
         ``reference_fn(t_utc_s, r_itrs_km) -> b_itrs_nt``: the reference field anywhere, for
         gradients off the track; default the ``orbitcal.truth`` model named ``reference_field``.
@@ -168,6 +172,7 @@ class DiagnosisData:
     b_ext_body_nt: FloatArray | None = None
     calibration_prior: CalibrationPrior | None = None
     positions_measured: bool = False
+    element_age_days: float | None = None
     reference_fn: Callable[[FloatArray, FloatArray], FloatArray] | None = None
 
     def __post_init__(self) -> None:
@@ -211,6 +216,7 @@ class DiagnosisData:
             b_ext_body_nt=pick(self.b_ext_body_nt),  # type: ignore[arg-type]
             calibration_prior=self.calibration_prior,
             positions_measured=self.positions_measured,
+            element_age_days=self.element_age_days,
             reference_fn=self.reference_fn,
         )
 
@@ -285,15 +291,28 @@ class DiagnosisData:
         the two effects apart. Central differences of the reference field (``reference_fn``, else
         the model named ``reference_field``) over +-5 km, rotated into the body frame.
         """
-        field_fn = self.reference_fn
-        if field_fn is None:
-            from orbitcal.truth import reference_field_itrs_nt
+        return self.gradients_at(self.r_itrs_km, self.orbit_frame_itrs)
 
-            name = self.reference_field
+    @property
+    def reference_field_fn(self) -> Callable[[FloatArray, FloatArray], FloatArray]:
+        """``fn(t_utc_s, r_itrs_km) -> b_itrs_nt``: :attr:`reference_fn`, else the model named
+        :attr:`reference_field`."""
+        if self.reference_fn is not None:
+            return self.reference_fn
+        from orbitcal.truth import reference_field_itrs_nt
 
-            def field_fn(t: FloatArray, r: FloatArray) -> FloatArray:
-                return np.asarray(reference_field_itrs_nt(t, r, field=name))
+        name = self.reference_field
 
+        def field_fn(t: FloatArray, r: FloatArray) -> FloatArray:
+            return np.asarray(reference_field_itrs_nt(t, r, field=name))
+
+        return field_fn
+
+    @cached_property
+    def orbit_frame_itrs(self) -> FloatArray:
+        """Unit vectors radial, inertial along-track and orbit normal at each sample, ITRS
+        components, (N, 3, 3) with ``[:, :, k]`` the k-th (the along-track one along the
+        velocity in inertial space, the Earth's rotation added to the ITRS velocity)."""
         r = self.r_itrs_km
         omega = np.array([0.0, 0.0, EARTH_ROTATION_RAD_S])
         v_in = _time_derivative(self.t_utc_s, r) + np.cross(omega, r)
@@ -301,22 +320,29 @@ class DiagnosisData:
         normal = np.cross(radial, v_in)
         normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
         along = np.cross(normal, radial)
+        return np.stack([radial, along, normal], axis=2)
+
+    def gradients_at(self, r_itrs_km: FloatArray, frame_itrs: FloatArray) -> FloatArray:
+        """The reference field's gradients at positions ``r_itrs_km`` (N, 3) along the three
+        directions of ``frame_itrs`` (N, 3, 3), in the body frame of each sample [nT/km],
+        (N, 3, 3): central differences over +-5 km, evaluated every
+        :data:`GRADIENT_KNOT_SPACING_S` along the track and interpolated."""
+        field_fn = self.reference_field_fn
         h_km = 5.0
 
         def gradient_itrs(t: FloatArray, r_and_dirs: FloatArray) -> FloatArray:
             pos, dirs = r_and_dirs[:, :3], r_and_dirs[:, 3:].reshape(-1, 3, 3)
             out = np.empty((t.shape[0], 3, 3))
             for k in range(3):
-                plus = np.asarray(field_fn(t, pos + h_km * dirs[:, k]))
-                minus = np.asarray(field_fn(t, pos - h_km * dirs[:, k]))
+                plus = np.asarray(field_fn(t, pos + h_km * dirs[:, :, k]))
+                minus = np.asarray(field_fn(t, pos - h_km * dirs[:, :, k]))
                 out[:, :, k] = (plus - minus) / (2.0 * h_km)
             return out
 
-        # Evaluated every GRADIENT_KNOT_SPACING_S along the track and interpolated.
         grad = along_track(
             gradient_itrs,
             self.t_utc_s,
-            np.column_stack([r, radial, along, normal]),
+            np.column_stack([r_itrs_km, frame_itrs.reshape(-1, 9)]),
             GRADIENT_KNOT_SPACING_S,
         )
         out = np.empty((self.n, 3, 3))

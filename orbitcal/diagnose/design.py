@@ -8,6 +8,7 @@ come from a scan of the data (:mod:`orbitcal.diagnose.attitude_scan`).
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -34,6 +35,7 @@ from orbitcal.diagnose.data import (
     DiagnosisData,
     _time_derivative,
 )
+from orbitcal.diagnose.orbit_shift import along_track_offset_km, shifted_columns
 
 __all__ = ["DesignBlock", "DesignFn"]
 
@@ -75,6 +77,13 @@ class DesignBlock:
         When the form the training BIC prefers fits only with a parameter outside its physical
         range, the best form that fits within the ranges is taken instead (the external field
         on a span shorter than an orbit: ``joint_fit._plausible``).
+    element_age_days : float, optional
+        The element set's age at the data, which widens the orbit error's ranges
+        (:attr:`DiagnosisData.element_age_days`).
+    sensor_matrix : bool
+        The regressors already hold the sensor's matrix (estimated with the form: a field of
+        thousands of nT, :mod:`orbitcal.diagnose.orbit_shift`); the stated values are not
+        refitted through the fitted one again (``uncertainty.through_sensor``).
     """
 
     source: FloatArray | Columns
@@ -87,6 +96,8 @@ class DesignBlock:
     indexed: bool = field(default=False, compare=False)
     unless_indexed: bool = field(default=False, compare=False)
     in_range_forms: bool = field(default=False, compare=False)
+    element_age_days: float | None = field(default=None, compare=False)
+    sensor_matrix: bool = field(default=False, compare=False)
 
     @property
     def n(self) -> int:
@@ -497,8 +508,28 @@ def _design_orbit(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
         ],
         variant="rtn",
     )
+    forms = [growing, rtn]
+    # Hundreds of km off: the same form linearised where the spacecraft is (orbit_shift).
+    rtn_columns = rtn.source
+    assert isinstance(rtn_columns, ScaledVectorColumns)
+    shift = along_track_offset_km(data, train, rtn_columns, tau)
+    if shift is not None:
+        s0, a = shift
+        forms.append(
+            DesignBlock(
+                shifted_columns(data, s0, tau, a),
+                rtn.names,
+                variant=f"rtn_shifted_{s0:.0f}km",
+                sensor_matrix=True,
+            )
+        )
+    age = data.element_age_days
     return DesignBlock(
-        grad[:, :, None], ["along_track_km"], "constant", alternatives=(growing, rtn)
+        grad[:, :, None],
+        ["along_track_km"],
+        "constant",
+        alternatives=tuple(dataclasses.replace(f, element_age_days=age) for f in forms),
+        element_age_days=age,
     )
 
 

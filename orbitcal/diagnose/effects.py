@@ -36,6 +36,7 @@ from orbitcal.diagnose.bounds import (
     STORM_MAIN_PHASE_MAX_NT_PER_H,
     ParamRange,
     PrefixRanges,
+    aged_range,
     match_prefix,
     storm_consistency,
     symmetric,
@@ -130,6 +131,10 @@ class Effect:
         ``consistency(names, values, sds) -> list of str``: why the fitted parameters contradict
         a relation physics fixes between them (empty when they do not); a variant that does is
         not chosen.
+    age_growth : tuple of (prefix, int, float)
+        Parameters whose range widens with the element set's age at the data (the orbit
+        error's), by prefix: the power of the age they widen with beyond two days, and the
+        least half-width per day of age (:func:`orbitcal.diagnose.bounds.aged_range`).
     """
 
     name: str
@@ -144,6 +149,7 @@ class Effect:
     regional_test: RegionalTest | None = None
     param_ranges: PrefixRanges = ()
     consistency: Callable[[list[str], list[float], list[float]], list[str]] | None = None
+    age_growth: tuple[tuple[str, int, float], ...] = ()
 
     @property
     def rescanned_beside_others(self) -> bool:
@@ -164,9 +170,14 @@ class Effect:
             return self.design(data, train)
         return _owned(self.build_beside(data, train, fixed), self.name)
 
-    def param_range(self, name: str) -> ParamRange:
-        """The physical range of its parameter ``name`` (unbounded when none is declared)."""
-        return match_prefix(self.param_ranges, name)
+    def param_range(self, name: str, age_days: float | None = None) -> ParamRange:
+        """The physical range of its parameter ``name`` (unbounded when none is declared), for
+        an element set ``age_days`` from the data (of unknown age if None)."""
+        rng = match_prefix(self.param_ranges, name)
+        power, per_day = next(
+            ((k, d) for prefix, k, d in self.age_growth if name.startswith(prefix)), (0, 0.0)
+        )
+        return aged_range(rng, power, per_day, age_days)
 
     def inconsistencies(self, names: list[str], values: list[float], sds: list[float]) -> list[str]:
         """Why fitted values of its parameters contradict each other (:attr:`consistency`)."""
@@ -200,13 +211,14 @@ def block_ranges(block: DesignBlock) -> list[ParamRange]:
     if not block.effect:
         return [FREE] * block.width
     effect = get_effect(block.effect)
-    return [effect.param_range(n) for n in block.names]
+    return [effect.param_range(n, block.element_age_days) for n in block.names]
 
 
-def effect_param_range(effect: str, name: str) -> ParamRange:
+def effect_param_range(effect: str, name: str, age_days: float | None = None) -> ParamRange:
     """The range of the parameter ``name`` of the effect called ``effect`` (unbounded when no
-    effect of the catalogue is called so): for the report's effects, named by their dicts."""
-    return _BY_NAME[effect].param_range(name) if effect in _BY_NAME else FREE
+    effect of the catalogue is called so), for an element set ``age_days`` from the data: for
+    the report's effects, named by their dicts."""
+    return _BY_NAME[effect].param_range(name, age_days) if effect in _BY_NAME else FREE
 
 
 def block_inconsistencies(block: DesignBlock, values: list[float], sds: list[float]) -> list[str]:
@@ -435,12 +447,25 @@ CATALOGUE: tuple[Effect, ...] = (
             # of an element set
             (
                 "along_track_rate_km_per_day",
-                symmetric(50.0, "SGP4 along-track error growth <= 50 km/day"),
+                symmetric(
+                    600.0,
+                    "SGP4 along-track error growth: drag <= 50 km/day, a manoeuvre after the "
+                    "epoch 3 dv (260 km/day per m/s; ISS reboosts are 0.5-2 m/s)",
+                ),
             ),
             ("along_track_km", symmetric(100.0, "SGP4 along-track error <= 100 km")),
             ("along_track_", symmetric(20.0, "once-per-rev along-track error <= 20 km")),
             ("radial_", symmetric(20.0, "radial error of an element set <= 20 km")),
             ("cross_track_", symmetric(20.0, "cross-track error of an element set <= 20 km")),
+        ),
+        # older than two days: the offset widens as the square of the age (drag), the rest as
+        # the age; a manoeuvre after the epoch moves the offset at up to the rate's bound
+        age_growth=(
+            ("along_track_km", 2, 600.0),
+            ("along_track_rate", 0, 0.0),
+            ("along_track_", 1, 0.0),
+            ("radial_", 1, 0.0),
+            ("cross_track_", 1, 0.0),
         ),
     ),
     Effect(

@@ -321,12 +321,12 @@ def _refit(
     return _Final(list(keep), new, r, norm_rms_nt(r[att.holdout]))
 
 
-def _bound_limited(effect: dict[str, Any]) -> dict[str, bool]:
+def _bound_limited(effect: dict[str, Any], age_days: float | None = None) -> dict[str, bool]:
     out: dict[str, bool] = {}
     for name, iv in (effect.get("param_intervals_90") or {}).items():
         if iv is None or len(iv) != 2 or iv[0] is None or iv[1] is None:
             continue
-        rng = effect_param_range(str(effect.get("name")), name)
+        rng = effect_param_range(str(effect.get("name")), name, age_days)
         tol = 1e-6 * max(
             abs(rng.lower) if np.isfinite(rng.lower) else 0.0,
             abs(rng.upper) if np.isfinite(rng.upper) else 0.0,
@@ -755,7 +755,7 @@ def review_report(
             f"later time blocks (the last {share:.0%} of the samples) that no fit saw"
         )
     for e in report["effects"]:
-        limited = _bound_limited(e)
+        limited = _bound_limited(e, data.element_age_days)
         e["param_bound_limited"] = limited
         e["bound_limited"] = any(limited.values())
     rv = rv if rv is not None else review(data, att)

@@ -127,11 +127,12 @@ def _param_meaning(name: str) -> str:
     return f"[{unit}]" if unit else ""
 
 
-def _bounds(effect: str, name: str) -> tuple[float, float] | None:
-    """The physical range of ``effect``'s parameter ``name`` (None when unbounded)."""
+def _bounds(effect: str, name: str, age_days: float | None) -> tuple[float, float] | None:
+    """The physical range of ``effect``'s parameter ``name`` for an element set ``age_days``
+    from the data (None when unbounded)."""
     from orbitcal.diagnose.effects import effect_param_range
 
-    r = effect_param_range(effect, name)
+    r = effect_param_range(effect, name, age_days)
     if not (math.isfinite(r.lower) and math.isfinite(r.upper)):
         return None
     return r.lower, r.upper
@@ -160,7 +161,7 @@ def _is_bound(x: float, edge: float) -> bool:
     return abs(x - edge) <= 1e-3 * max(abs(edge), 1.0)
 
 
-def _param_rows(effect: dict[str, Any]) -> list[ParamRow]:
+def _param_rows(effect: dict[str, Any], age_days: float | None = None) -> list[ParamRow]:
     intervals = effect.get("param_intervals_90") or {}
     marked = _flagged(effect)
     rows = []
@@ -172,7 +173,7 @@ def _param_rows(effect: dict[str, Any]) -> list[ParamRow]:
         text = "–"
         if isinstance(iv, list | tuple) and len(iv) == 2 and None not in iv:
             lo, hi = float(iv[0]), float(iv[1])
-            bounds = _bounds(str(effect.get("name")), name)
+            bounds = _bounds(str(effect.get("name")), name, age_days)
             if bounds is not None and (_is_bound(lo, bounds[0]) or _is_bound(hi, bounds[1])):
                 limited = True
             text = f"{format_number(lo)} … {format_number(hi)}"
@@ -222,8 +223,8 @@ class EffectView:
     all_bound_limited: bool
 
 
-def _effect_view(e: dict[str, Any]) -> EffectView:
-    rows = _param_rows(e)
+def _effect_view(e: dict[str, Any], age_days: float | None = None) -> EffectView:
+    rows = _param_rows(e, age_days)
     iv = e.get("shrink_interval_90")
     return EffectView(
         name=str(e.get("name")),
@@ -708,7 +709,9 @@ def _section(report: dict[str, Any], key: str) -> dict[str, Any]:
 
 
 def _page(report: dict[str, Any], title: str) -> Page:
-    effects = [_effect_view(e) for e in report.get("effects", []) if isinstance(e, dict)]
+    age = _section(report, "data").get("element_age_days")
+    age_days = float(age) if isinstance(age, int | float) and not isinstance(age, bool) else None
+    effects = [_effect_view(e, age_days) for e in report.get("effects", []) if isinstance(e, dict)]
     final = _section(report, "final")
     where_final = final.get("where")
     figures = [

@@ -244,7 +244,17 @@ def diagnosis_data(
         b_ext_body_nt=b_ext_body,
         calibration_prior=calibration_prior,
         positions_measured=telemetry.r_itrs_km is not None,
+        element_age_days=_element_age_days(orbit, t) if telemetry.r_itrs_km is None else None,
     )
+
+
+def _element_age_days(orbit: Propagator | None, t_utc_s: FloatArray) -> float | None:
+    """Days from an element set's epoch to the middle of the data (None without an epoch)."""
+    epoch = getattr(orbit, "epoch_utc_s", None)
+    if epoch is None or not np.isfinite(float(epoch)) or t_utc_s.size == 0:
+        return None
+    middle = 0.5 * (float(t_utc_s[0]) + float(t_utc_s[-1]))
+    return (middle - float(epoch)) / 86400.0
 
 
 def _checked_quaternions(telemetry: Telemetry) -> FloatArray:

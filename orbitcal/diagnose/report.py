@@ -229,6 +229,9 @@ def _data_section(data: DiagnosisData, att: Attribution) -> dict[str, Any]:
         "holdout": "later time blocks (last 30 % of the span) that no fit saw",
         "candidates_without_witness": sorted(set(EFFECT_NAMES) - {e.name for e in att.effects}),
         "crust_model": data.crust_model,
+        "element_age_days": _num(data.element_age_days)
+        if data.element_age_days is not None
+        else None,
     }
 
 

@@ -95,13 +95,14 @@ def through_sensor(
     worlds: 4 of 8 intervals held the truth). The selection, the residuals and the verdict are
     those of ``fit``; only the stated values and intervals come from this refit.
     """
-    if not any(b.effect in THROUGH_SENSOR for b in fit.blocks):
+    seen = [b.effect in THROUGH_SENSOR and not b.sensor_matrix for b in fit.blocks]
+    if not any(seen):
         return fit
     blocks = [
         dataclasses.replace(b, source=_ThroughSensor(b, fit.a), alternatives=(), refine=None)
-        if b.effect in THROUGH_SENSOR
+        if through
         else b
-        for b in fit.blocks
+        for b, through in zip(fit.blocks, seen, strict=True)
     ]
     return fit_joint(data, train, blocks, robust=robust, bounded=fit.bounded)
 
