@@ -16,11 +16,11 @@ from orbitcal.diagnose.effects import DesignBlock, DiagnosisData, get_effect
 from orbitcal.diagnose.gap import _lies
 from orbitcal.diagnose.honesty import (
     GAP_TIMES_NOISE,
-    _bound_limited,
     noise_floor_nt,
     residue_test,
     review,
 )
+from orbitcal.diagnose.honesty_report import _bound_limited
 from orbitcal.metrics import norm_rms_nt
 
 N = 3000
@@ -230,7 +230,7 @@ def _report(att: Attribution, verdict: str, confidence: float | None) -> dict[st
 
 
 def test_none_far_above_the_noise_is_an_unexplained_gap_with_its_candidates() -> None:
-    from orbitcal.diagnose.honesty import review_report
+    from orbitcal.diagnose.honesty_report import review_report
 
     data, att = _null_attribution(slow_nt=40.0)
     report = review_report(_report(att, "none", 0.99), data, att)
@@ -252,7 +252,7 @@ def test_none_far_above_the_noise_is_an_unexplained_gap_with_its_candidates() ->
 
 
 def test_a_verdict_not_separable_and_unstable_says_both() -> None:
-    from orbitcal.diagnose.honesty import review_report
+    from orbitcal.diagnose.honesty_report import review_report
 
     data, att = _null_attribution(slow_nt=0.0)
     report = review_report(_report(att, "time_offset", 0.0), data, att)
@@ -317,7 +317,8 @@ def test_an_effect_the_calibration_absorbs_beside_an_unexplained_gap_is_not_name
     12 parameters and what is left of it is smaller than the unexplained held-out residual --
     the held-out blocks cannot tell it from the calibration, so it is withdrawn and the verdict
     says so, naming it."""
-    from orbitcal.diagnose.honesty import INSEPARABLE_LIMIT, review_report
+    from orbitcal.diagnose.honesty import INSEPARABLE_LIMIT
+    from orbitcal.diagnose.honesty_report import review_report
 
     data, att = _stand_in_attribution(slow_nt=40.0)
     assert att.effects[0].absorbed_fraction >= INSEPARABLE_LIMIT  # the premise

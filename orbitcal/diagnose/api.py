@@ -189,7 +189,8 @@ def _run(
     document = build_report(data, att, where, learned=learned_result, where_final=where_final)
     # Issue 25: the report's claims checked on the held-out data (orbitcal.diagnose.honesty):
     # possible residues, a fall-back when the final model is worse than the baseline, the gap.
-    from orbitcal.diagnose.honesty import review, review_report, reviewed
+    from orbitcal.diagnose.honesty import review, reviewed
+    from orbitcal.diagnose.honesty_report import review_report
 
     rv = review(data, att)
     final_att = reviewed(data, att, rv)
