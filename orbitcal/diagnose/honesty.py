@@ -1,7 +1,8 @@
 """A report that knows when it cannot tell (issue 25).
 
 The attribution (:func:`orbitcal.diagnose.attribution.attribute`) selects effects by how much
-they shrink the held-out residual; :func:`review_report` then checks what it is about to claim
+they shrink the held-out residual; the review (:func:`review`, written into the report by
+:func:`orbitcal.diagnose.honesty_report.review_report`) then checks what it is about to claim
 against the same held-out data, and says so where a claim does not hold:
 
 * **Possible residue.** A second or third selected effect is named only if it explains a share of
