@@ -126,4 +126,29 @@ def test_an_orbit_error_of_hundreds_of_km_is_named_and_sized(
         or not report["gap"]["unexplained"]
     )
     assert report["final"]["holdout_rms_nt"] < 3.0
+    assert "remark" not in orbit  # a constant offset: no drift beyond what drag gives
     assert math.isfinite(report["baseline"]["holdout_rms_nt"])
+
+
+def test_a_drift_faster_than_drag_points_to_a_manoeuvre() -> None:
+    from orbitcal.diagnose.report import _remark
+
+    remark = _remark(_score("orbit_error", {"along_track_rate_km_per_day": -226.6}), 6.42)
+    assert remark is not None and "-227 km/day" in remark and "6.4 days old" in remark
+    assert "manoeuvre" in remark
+    assert _remark(_score("orbit_error", {"along_track_rate_km_per_day": 12.0}), 6.4) is None
+    assert _remark(_score("time_offset", {"dt_s": 0.5}), None) is None
+
+
+def _score(name: str, params: dict[str, float]) -> Any:
+    from orbitcal.diagnose.attribution import EffectScore
+
+    return EffectScore(
+        name=name,
+        significant=True,
+        holdout_rms_before_nt=10.0,
+        holdout_rms_after_nt=2.0,
+        p_value=1e-6,
+        params=dict(params),
+        unique_rms_increase_nt=8.0,
+    )

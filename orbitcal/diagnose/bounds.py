@@ -21,6 +21,7 @@ import math
 from dataclasses import dataclass
 
 __all__ = [
+    "DRAG_RATE_KM_PER_DAY",
     "ELEMENT_AGE_REFERENCE_DAYS",
     "FREE",
     "ParamRange",
@@ -79,6 +80,10 @@ FREE = ParamRange(-math.inf, math.inf, "no physical range")
 #: Ranges by parameter-name prefix, first match wins (an effect's ``param_ranges``).
 PrefixRanges = tuple[tuple[str, ParamRange], ...]
 
+
+#: The fastest along-track drift drag gives an element set's error [km/day] (high drag); faster
+#: is a manoeuvre after its epoch (the orbit error's range allows one; its entry says so).
+DRAG_RATE_KM_PER_DAY = 50.0
 
 #: Age of an element set at the data up to which the orbit error's ranges hold as declared [d];
 #: an older set's ranges widen (:func:`aged_range`).

@@ -200,6 +200,8 @@ def _notes(effect: dict[str, Any]) -> list[str]:
         out.append("cannot be told apart on these data from: " + ", ".join(map(str, twins)))
     if effect.get("implausible_reason"):
         out.append(f"implausible: {effect['implausible_reason']}")
+    if isinstance(effect.get("remark"), str):
+        out.append(effect["remark"])
     if str(effect.get("name", "")).startswith("magnetorquer") or any(
         str(k).startswith("coupling_") for k in params
     ):

@@ -131,7 +131,7 @@ def build_report(
         else None,
         "verdict_status": _verdict_status(att, separation),
         "separation": _clean(separation),
-        "effects": [_effect_entry(e) for e in att.effects],
+        "effects": [_effect_entry(e, data.element_age_days) for e in att.effects],
         "where": _clean(where),
         "final": _final_section(att, where_final),
         "split_fits": [_split_fit_entry(s) for s in att.split_fits],
@@ -143,9 +143,10 @@ def build_report(
     return report
 
 
-def _effect_entry(e: EffectScore) -> dict[str, Any]:
-    """One effect's entry of the report's ``effects``."""
-    return {
+def _effect_entry(e: EffectScore, age_days: float | None = None) -> dict[str, Any]:
+    """One effect's entry of the report's ``effects`` (``remark``: what its values say beyond
+    the verdict, :func:`_remark`)."""
+    entry = {
         "name": e.name,
         "significant": bool(e.significant),
         "holdout_rms_before_nt": _rms(e.holdout_rms_before_nt),
@@ -168,6 +169,27 @@ def _effect_entry(e: EffectScore) -> dict[str, Any]:
         if e.absorbed_fraction is not None
         else None,
     }
+    remark = _remark(e, age_days)
+    if remark:
+        entry["remark"] = remark
+    return entry
+
+
+def _remark(e: EffectScore, age_days: float | None) -> str | None:
+    """An orbit error drifting faster than drag makes an element set drift: the words that it
+    points to a manoeuvre after the element set's epoch (the range allows one,
+    ``docs/diagnosis_priors.md``)."""
+    from orbitcal.diagnose.bounds import DRAG_RATE_KM_PER_DAY
+
+    rate = e.params.get("along_track_rate_km_per_day") if e.name == "orbit_error" else None
+    if not isinstance(rate, int | float) or abs(float(rate)) <= DRAG_RATE_KM_PER_DAY:
+        return None
+    old = f" {abs(age_days):.1f} days old" if age_days is not None else ""
+    return (
+        f"the element set drifts from the spacecraft at {float(rate):.0f} km/day, more than drag "
+        f"makes an element set{old} drift (<= {DRAG_RATE_KM_PER_DAY:g} km/day): a manoeuvre "
+        "after its epoch? An element set from after it, or measured (GNSS) positions, would tell"
+    )
 
 
 def _baseline_section(data: DiagnosisData, att: Attribution) -> dict[str, Any]:
