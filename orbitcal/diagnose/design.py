@@ -427,13 +427,20 @@ def _design_crustal(data: DiagnosisData, train: BoolArray) -> DesignBlock | None
     counts them as core, its crust starts at degree 21). Independent worlds whose crust was
     CHAOS-7's (degrees 21-185) fitted LCS-1 (degrees 14-185) at 0.3-0.66 x their scale of 1-2
     and left it unnamed; LCS-1's degrees 21+ alone correlate 0.84 with it, its degrees 14+
-    0.60."""
+    0.60.
+
+    Only over an orbit or more: along one stretch of track the low band's wavelengths (2,000 km
+    and more) are a smooth curve that a storm's misfit or the calibration's extrapolation
+    draws as well (the real storm pass: a crust named beside the external field in one of 40
+    fresh draws with the bands, none without)."""
     if data.b_crust_body_nt is None:
         return None
     variant = data.crust_model or "model"
     low = data.b_crust_low_body_nt
+    t_train = data.t_utc_s[train]
+    span_s = float(t_train[-1] - t_train[0]) if t_train.size > 1 else 0.0
     bands: tuple[DesignBlock, ...] = ()
-    if low is not None and float(np.max(np.abs(low))) > 0.0:
+    if low is not None and float(np.max(np.abs(low))) > 0.0 and span_s >= ORBIT_S:
         bands = (
             DesignBlock(
                 np.stack([data.b_crust_body_nt - low, low], axis=2),
