@@ -206,23 +206,30 @@ def test_the_external_field_named_by_its_constant_when_its_trend_leaves_the_phys
 
 @pytest.mark.slow
 @pytest.mark.parametrize(("seed", "rate_deg_s"), [(3517, 1.0), (3522, 1.5)])
-def test_a_sun_driven_field_without_an_eclipse_is_not_named(
+def test_a_sun_driven_field_without_an_eclipse_gives_way_to_the_external_field(
     tmp_path: Path, seed: int, rate_deg_s: float
 ) -> None:
     # The pass is lit throughout and shorter than an orbit: the Sun-driven template's one
     # signature (on when lit, off in eclipse) is absent, and what it draws is a field fixed in
     # space, the ring current's among them. The report said so and still named it significant
     # (3522: the verdict, "tentative"; 3517: withdrawn as overshadowed). Drawn after the rule was
-    # written: seeds 3500-3523, the two where it acts.
+    # written: seeds 3500-3523, the two where it acts. Withdrawn, it left the verdict to the
+    # currents with 27 (7.9) nT more held out than its model; the external field, significant on
+    # its own and a field fixed in space, now stands in for it (held-out 74.6 -> 22.7 nT, 78.8 ->
+    # 12.0 nT; fresh draws 3400 no. 8 and 3300 no. 17 had lost the external field this way).
     report = _diagnosed(tmp_path, "tumbling", seed, rate_deg_s=rate_deg_s)
-    sun = {e["name"]: e for e in report["effects"]}["sun_driven"]
+    by_name = {e["name"]: e for e in report["effects"]}
+    sun = by_name["sun_driven"]
     assert report["honesty"]["unlit"] == ["sun_driven"]
     assert sun["significant"] is False and sun["status"] == "unlit"
     assert "no eclipse" in sun["unlit_reason"] and "external_field" in sun["unlit_reason"]
-    assert report["verdict"] != "sun_driven"
+    assert report["verdict"] == "external_field", report["verdict_status"]
+    assert report["honesty"]["stood_in"] == ["external_field"]
+    external = by_name["external_field"]
+    assert external["significant"] and external["stands_in_for"] == ["sun_driven"]
     assert {e["name"] for e in report["effects"] if e["significant"]} <= ALLOWED
-    statement = report["gap"]["statement"]
-    assert "a field fixed in space" in statement and "external_field" in statement
+    # the gap no longer says a field fixed in space may take it up: the model holds one now
+    assert "a field fixed in space" not in report["gap"]["statement"]
     refused = {c["name"]: c["refused_because"] for c in report["gap"]["closest_candidates"]}
     assert refused.get("sun_driven", "not the Sun's").startswith("not the Sun's")
-    assert report["final"]["holdout_rms_nt"] <= report["baseline"]["holdout_rms_nt"] + 1e-9
+    assert report["final"]["holdout_rms_nt"] < 0.4 * report["baseline"]["holdout_rms_nt"]

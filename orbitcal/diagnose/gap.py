@@ -201,7 +201,10 @@ def gap_section(
             f"{times:.1f} x the noise floor ({sigma:.3g} nT); no candidate explains it"
             + _lies(where.get("concentration"))
             + _wandering([e["name"] for e in report["effects"] if e.get("status") == "wander"])
-            + _fixed_in_space([e for e in report["effects"] if e.get("status") == "unlit"])
+            + _fixed_in_space(
+                [e for e in report["effects"] if e.get("status") == "unlit"],
+                stood_in=any(e.get("stands_in_for") for e in report["effects"]),
+            )
         )
     else:
         gap["statement"] = (
@@ -296,9 +299,10 @@ def _lies(concentration: object) -> str:
     return f"; it lies mostly at {concentration}"
 
 
-def _fixed_in_space(unlit: Sequence[dict[str, Any]]) -> str:
-    """The clause of a gap statement for a Sun-driven field withdrawn for want of an eclipse."""
-    if not unlit:
+def _fixed_in_space(unlit: Sequence[dict[str, Any]], *, stood_in: bool = False) -> str:
+    """The clause of a gap statement for a Sun-driven field withdrawn for want of an eclipse
+    (none when the external field stands in for it: the model holds that field then)."""
+    if not unlit or stood_in:
         return ""
     e = unlit[0]
     before, after = e.get("holdout_rms_before_nt"), e.get("holdout_rms_after_nt")

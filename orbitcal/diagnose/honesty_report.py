@@ -154,6 +154,15 @@ def _mark_withdrawn(report: dict[str, Any], att: Attribution, rv: Review) -> Non
         )
     _withdraw(by_name, rv.inseparable, "inseparable")
     _withdraw(by_name, rv.unlit, "unlit", "unlit_reason", UNLIT_REASON)
+    for name in rv.stood_in:
+        e = by_name[name]
+        e["significant"] = True
+        e["status"] = "selected"
+        e["stands_in_for"] = list(rv.unlit)
+        e["stand_in_reason"] = (
+            f"significant on its own and a field fixed in space, as {', '.join(rv.unlit)} drew "
+            "without an eclipse: in its place it shrinks the held-out residual significantly"
+        )
     for name in inseparable_candidates(att):
         e = by_name[name]
         e["inseparable"] = True
@@ -256,6 +265,7 @@ def _honesty_section(rv: Review) -> dict[str, Any]:
         "possible_residue": [r["effect"] for r in rv.residues if r["possible_residue"]],
         "inseparable": list(rv.inseparable),
         "unlit": list(rv.unlit),
+        "stood_in": list(rv.stood_in),
         "orphaned": list(rv.orphaned),
         "overshadowed": list(rv.overshadowed),
         "immaterial": list(rv.immaterial),
