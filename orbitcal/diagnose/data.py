@@ -308,11 +308,12 @@ class DiagnosisData:
 
         return field_fn
 
-    @cached_property
+    @property
     def orbit_frame_itrs(self) -> FloatArray:
         """Unit vectors radial, inertial along-track and orbit normal at each sample, ITRS
         components, (N, 3, 3) with ``[:, :, k]`` the k-th (the along-track one along the
-        velocity in inertial space, the Earth's rotation added to the ITRS velocity)."""
+        velocity in inertial space, the Earth's rotation added to the ITRS velocity). Computed
+        when asked (the gradients once, a large orbit error's form): not held, 72 B a sample."""
         r = self.r_itrs_km
         omega = np.array([0.0, 0.0, EARTH_ROTATION_RAD_S])
         v_in = _time_derivative(self.t_utc_s, r) + np.cross(omega, r)

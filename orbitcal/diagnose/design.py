@@ -418,6 +418,13 @@ def _field_power(b_nt: FloatArray, power: int, index: Index) -> FloatArray:
     return np.asarray((b_nt[index] / FIELD_SCALE_NT) ** power)
 
 
+def _crust_bands(crust_nt: FloatArray, low_nt: FloatArray, index: Index) -> FloatArray:
+    """The crust's degrees above the low band and the low band at the samples ``index``,
+    (m, 3, 2): built when asked, not held."""
+    low = low_nt[index]
+    return np.stack([crust_nt[index] - low, low], axis=2)
+
+
 def _design_crustal(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
     """The crustal model scaled; where it has degrees at and below
     :data:`~orbitcal.diagnose.prepare.CRUST_LOW_BAND_NMAX` above the main field's, the form
@@ -443,7 +450,7 @@ def _design_crustal(data: DiagnosisData, train: BoolArray) -> DesignBlock | None
     if low is not None and float(np.max(np.abs(low))) > 0.0 and span_s >= ORBIT_S:
         bands = (
             DesignBlock(
-                np.stack([data.b_crust_body_nt - low, low], axis=2),
+                FunctionColumns(data.n, 2, partial(_crust_bands, data.b_crust_body_nt, low)),
                 ["crust_scale", "crust_low_degrees_scale"],
                 variant=f"{variant} bands",
             ),
