@@ -90,3 +90,27 @@ def swarm_a_temperature_world(noise_std_nt: float = 2.0) -> tuple[World, Orbit]:
         effects=[make_effect("temperature"), make_effect("magnetorquer")],
     )
     return world, orbit
+
+
+def simulated_report(
+    tmp_path: Path, effect: str, *, attitude: str, seed: int = 5, noise_std_nt: float | None = None
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """``orbitcal diagnose``'s report (defaults) of four orbits of Swarm A at 10 s from
+    2023-07-05 with ``effect`` injected by ``orbitcal simulate`` (``NAME:k=v,...``), and the
+    simulation's truth."""
+    import json
+
+    from orbitcal.cli import main
+
+    world, out = tmp_path / "world", tmp_path / "report.json"
+    argv = [
+        "simulate", "--tle", str(REAL_TLES_FILE), "--norad", str(SWARM_A_NORAD),
+        "--start", "2023-07-05T00:00:00Z", "--duration-s", "22600", "--cadence-s", "10",
+        "--attitude", attitude, "--effect", effect, "--seed", str(seed), "--out", str(world),
+    ]  # fmt: skip
+    if noise_std_nt is not None:
+        argv += ["--noise-std-nt", f"{noise_std_nt:g}"]
+    assert main(argv) == 0
+    table, tle = world / "telemetry.csv", world / "spacecraft.tle"
+    assert main(["diagnose", str(table), "--tle", str(tle), "--out", str(out)]) == 0
+    return json.loads(out.read_text()), json.loads((world / "truth.json").read_text())

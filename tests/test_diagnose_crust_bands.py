@@ -9,15 +9,14 @@ named.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from shared_worlds import simulated_report
 
 from orbitcal import frames
-from orbitcal.cli import main
 from orbitcal.diagnose.prepare import CRUST_LOW_BAND_NMAX
 from orbitcal.field.crust import crustal_field_above
 
@@ -41,49 +40,20 @@ def test_the_bands_add_up_to_the_crust_above_the_main_field() -> None:
     assert (mf7.nmin, mf7.nmax) == (16, 20)  # MF7 starts at degree 16
 
 
-def _diagnosed(tmp_path: Path, authorities: Path, model: str) -> dict[str, Any]:
+def _diagnosed(tmp_path: Path, model: str) -> dict[str, Any]:
     """``orbitcal diagnose`` (defaults: LCS-1 as the crustal candidate) of four orbits of
     Swarm A whose crust is ``model``'s at twice its size, 1 nT noise."""
-    world, out = tmp_path / "world", tmp_path / "report.json"
-    argv = [
-        "simulate",
-        "--tle",
-        str(authorities / "swarm_iss_real_tles.tle"),
-        "--norad",
-        "39452",
-        "--start",
-        "2023-07-05T00:00:00Z",
-        "--duration-s",
-        "22600",
-        "--cadence-s",
-        "10",
-        "--attitude",
-        "tumbling",
-        "--effect",
-        f"crustal_field:model={model},scale=2",
-        "--noise-std-nt",
-        "1",
-        "--seed",
-        "5",
-        "--out",
-        str(world),
-    ]
-    assert main(argv) == 0
-    table, tle = world / "telemetry.csv", world / "spacecraft.tle"
-    assert main(["diagnose", str(table), "--tle", str(tle), "--out", str(out)]) == 0
-    report: dict[str, Any] = json.loads(out.read_text())
-    return report
+    effect = f"crustal_field:model={model},scale=2"
+    return simulated_report(tmp_path, effect, attitude="tumbling", noise_std_nt=1.0)[0]
 
 
 def _crust(report: dict[str, Any]) -> dict[str, Any]:
     return next(e for e in report["effects"] if e["name"] == "crustal_field")
 
 
-def test_a_crust_without_its_low_degrees_is_named_and_sized(
-    tmp_path: Path, authorities: Path
-) -> None:
+def test_a_crust_without_its_low_degrees_is_named_and_sized(tmp_path: Path) -> None:
     """CHAOS-8.1's crust (degrees 21-185) through LCS-1: the low band fits ~0, the rest 2."""
-    report = _diagnosed(tmp_path, authorities, "CHAOS-8.1-static")
+    report = _diagnosed(tmp_path, "CHAOS-8.1-static")
     assert report["verdict"] == "crustal_field"
     assert [e["name"] for e in report["effects"] if e["significant"]] == ["crustal_field"]
     crust = _crust(report)
@@ -95,9 +65,9 @@ def test_a_crust_without_its_low_degrees_is_named_and_sized(
 
 
 @pytest.mark.slow
-def test_a_crust_with_its_low_degrees_keeps_its_scale(tmp_path: Path, authorities: Path) -> None:
+def test_a_crust_with_its_low_degrees_keeps_its_scale(tmp_path: Path) -> None:
     """MF7 (degrees 16-133) through LCS-1: its degrees above 20 still come out at 2."""
-    report = _diagnosed(tmp_path, authorities, "MF7")
+    report = _diagnosed(tmp_path, "MF7")
     assert report["verdict"] == "crustal_field"
     crust = _crust(report)
     assert 1.7 < crust["params"]["crust_scale"] < 2.3

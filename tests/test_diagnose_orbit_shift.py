@@ -8,15 +8,14 @@ and the ranges were those of a fresh, drag-only element set.
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from shared_worlds import simulated_report
 
-from orbitcal.cli import main
 from orbitcal.diagnose.data import DiagnosisData
 from orbitcal.diagnose.effects import effect_param_range, get_effect
 from orbitcal.diagnose.orbit_shift import moved_along_arc
@@ -81,35 +80,10 @@ def test_an_old_element_sets_ranges_widen_with_its_age() -> None:
 
 @pytest.mark.parametrize(("along_km", "attitude"), [(400.0, "tumbling"), (-250.0, "nadir")])
 def test_an_orbit_error_of_hundreds_of_km_is_named_and_sized(
-    tmp_path: Path, authorities: Path, along_km: float, attitude: str
+    tmp_path: Path, along_km: float, attitude: str
 ) -> None:
-    world, out = tmp_path / "world", tmp_path / "report.json"
-    argv = [
-        "simulate",
-        "--tle",
-        str(authorities / "swarm_iss_real_tles.tle"),
-        "--norad",
-        "39452",
-        "--start",
-        "2023-07-05T00:00:00Z",
-        "--duration-s",
-        "22600",
-        "--cadence-s",
-        "10",
-        "--attitude",
-        attitude,
-        "--effect",
-        f"orbit_error:along_track_km={along_km:g}",
-        "--seed",
-        "5",
-        "--out",
-        str(world),
-    ]
-    assert main(argv) == 0
-    table, tle = world / "telemetry.csv", world / "spacecraft.tle"
-    assert main(["diagnose", str(table), "--tle", str(tle), "--out", str(out)]) == 0
-    report: dict[str, Any] = json.loads(out.read_text())
-    truth = json.loads((world / "truth.json").read_text())
+    effect = f"orbit_error:along_track_km={along_km:g}"
+    report, truth = simulated_report(tmp_path, effect, attitude=attitude)
     info = next(e for e in truth["effects"] if e["name"] == "orbit_error")["info"]
     assert report["verdict"] == "orbit_error", report["verdict_status"]
     orbit = next(e for e in report["effects"] if e["name"] == "orbit_error")
