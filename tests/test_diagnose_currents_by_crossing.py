@@ -48,3 +48,7 @@ def test_currents_that_no_model_predicts_stay_named_without_their_model(
     # the gap they leave is stated, where they are
     assert report["gap"]["unexplained"]
     assert "|mlat|" in report["gap"]["statement"]
+    # ... as the currents' field, not as a field no candidate explains (independent world
+    # 10300 no. 8 said both "firm: field_aligned_currents" and "no candidate explains it")
+    assert "field_aligned_currents is named by its own test" in report["gap"]["statement"]
+    assert "no candidate explains it" not in report["gap"]["statement"]

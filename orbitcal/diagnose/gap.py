@@ -198,7 +198,8 @@ def gap_section(
     if unexplained:
         gap["statement"] = (
             f"an unexplained gap: the held-out residual is {rms:.3g} nT per component, "
-            f"{times:.1f} x the noise floor ({sigma:.3g} nT); no candidate explains it"
+            f"{times:.1f} x the noise floor ({sigma:.3g} nT); "
+            + _unmodelled((report.get("final") or {}).get("named_without_model") or [])
             + _lies(where.get("concentration"))
             + _wandering([e["name"] for e in report["effects"] if e.get("status") == "wander"])
             + _fixed_in_space(
@@ -283,6 +284,21 @@ def _taken_whole(names: Sequence[str], *, also: bool = False) -> str:
         f"span (>= {INSEPARABLE_LIMIT:.0%} of {whose} fitted field is a change of the 12 "
         f"parameters): if present, {who} cannot be separated from the calibration on this span"
         + (" either" if also else "")
+    )
+
+
+def _unmodelled(named: Sequence[str]) -> str:
+    """What explains the gap: nothing, or effects named by their own test whose fitted model
+    the final fit left out (it predicted the held-out blocks worse than none)."""
+    if not named:
+        return "no candidate explains it"
+    one = len(named) == 1
+    return (
+        f"{', '.join(named)} {'is' if one else 'are'} named by "
+        f"{'its' if one else 'their'} own test but {'has' if one else 'have'} no model in the "
+        "final fit (fitted on the training blocks, it predicted the held-out blocks worse than "
+        f"none), so {'its' if one else 'their'} field stays in this residual; no other "
+        "candidate explains it"
     )
 
 
