@@ -2,19 +2,11 @@
 
 from __future__ import annotations
 
-import dataclasses
-import itertools
-
 import numpy as np
 import pytest
 
 from orbitcal.data import real_tles_text
-from orbitcal.diagnose.attitude_scan import (
-    ATTITUDE_MIN_CYCLES_APART,
-    AttitudeScan,
-    design_attitude,
-    resolvable,
-)
+from orbitcal.diagnose.attitude_scan import AttitudeScan, design_attitude
 from orbitcal.diagnose.attribution import time_blocks
 from orbitcal.diagnose.bench import plan_compound_cases, simulate_compound_world
 from orbitcal.diagnose.effects import DesignBlock, get_effect
@@ -97,31 +89,3 @@ def test_beam_search_finds_the_periods_a_greedy_scan_locks_out(
     found = _periods(block)
     close = np.allclose(found, INJECTED_PERIODS_S, rtol=0.01)
     assert close == (beam > 1), found
-
-
-def test_periods_less_than_half_a_cycle_apart_over_the_span_are_one_period() -> None:
-    span_s = 15_800.0
-    # independent world 9500 no. 8: 0.034 cycles apart, a beat that carried a wander forward
-    assert not resolvable(11_824.0, [11_527.0], span_s)
-    assert resolvable(7_020.0, [5_400.0], 15_590.0)  # the simulator's closest pair: 0.67 cycles
-    assert resolvable(2_825.0, [5_650.0, 1_500.0], span_s)
-    assert resolvable(3_000.0, [], span_s)
-
-
-def test_a_slow_rotation_beside_the_sinusoids_draws_no_beat(attitude_and_time_offset) -> None:
-    """Half a sine of rotation over the span beside the simulator's three sinusoids: the scan
-    took 6,411 and 5,848 s for it (0.23 cycles apart over the training span) before periods had
-    to be told apart; every pair it keeps now is at least half a cycle apart."""
-    data, train = attitude_and_time_offset
-    t = data.t_utc_s[train]
-    span_s = float(t[-1] - t[0])
-    x = (data.t_utc_s - data.t_utc_s[0]) / span_s
-    slow = np.sin(np.pi * x)
-    dtheta_rad = 1e-3 * np.outer(slow - slow.mean(), [1.0, -0.6, 0.8])
-    b_raw_nt = data.b_raw_nt + np.cross(data.b_ref_body_nt, dtheta_rad)
-    block = design_attitude(dataclasses.replace(data, b_raw_nt=b_raw_nt), train)
-    assert block is not None
-    found = _periods(block)
-    assert len(found) == 3
-    for a, c in itertools.combinations(found, 2):
-        assert abs(1.0 / a - 1.0 / c) * span_s >= ATTITUDE_MIN_CYCLES_APART, found

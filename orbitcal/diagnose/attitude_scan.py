@@ -23,13 +23,7 @@ from orbitcal.diagnose.columns import (
 from orbitcal.diagnose.data import DiagnosisData
 from orbitcal.diagnose.design import DesignBlock
 
-__all__ = [
-    "ATTITUDE_MIN_CYCLES_APART",
-    "ATTITUDE_PERIODS_S",
-    "AttitudeScan",
-    "design_attitude",
-    "resolvable",
-]
+__all__ = ["ATTITUDE_PERIODS_S", "AttitudeScan", "design_attitude"]
 
 
 #: Periods scanned for the attitude-error sinusoids [s] (log-spaced), and how many are kept.
@@ -96,30 +90,6 @@ def design_attitude(
     return _attitude_block(data, train, chosen)
 
 
-#: Fewest cycles over the training span by which two periods of the attitude error must differ
-#: (:func:`resolvable`).
-ATTITUDE_MIN_CYCLES_APART = 0.5
-
-
-def resolvable(period_s: float, others_s: Sequence[float], span_s: float) -> bool:
-    """Whether a sinusoid of ``period_s`` is told apart from each of ``others_s`` on a training
-    span of ``span_s``: their frequencies differ by at least :data:`ATTITUDE_MIN_CYCLES_APART`
-    cycles over the span.
-
-    Two sinusoids ``d`` cycles apart over the span correlate about ``sinc(d)`` there: 0.64 at
-    half a cycle, 0.998 at 0.034. A fit of the exact shape separates them down to about half of
-    Rayleigh's one cycle (the simulator's 5,400 and 7,020 s are 0.67 cycles apart on 4.3 h of
-    training, and are found); closer, the two are one period to the data, and fitted together
-    they make a beat whose large opposite amplitudes follow whatever slow wander the training
-    residual holds and carry it into the held-out blocks (independent world 9500 no. 8: 11,527
-    and 11,824 s, 0.034 cycles apart on 4.4 h; the attitude error's held-out residual went from
-    12.5 to 17.6 nT).
-    """
-    return all(
-        abs(1.0 / period_s - 1.0 / c) * span_s >= ATTITUDE_MIN_CYCLES_APART for c in others_s
-    )
-
-
 def _first_best(periods_s: FloatArray, g: FloatArray, floor: float) -> tuple[float, float]:
     """The largest gain and the first period with it, if it beats ``floor`` (else ``floor, 0``):
     a sequential scan keeping strictly better gains picks the same one."""
@@ -156,13 +126,9 @@ def _refine_periods(
     for _ in range(passes):
         before = list(chosen)
         for j in range(len(chosen)):
-            others = chosen[:j] + chosen[j + 1 :]
-            basis = scan.basis(others)
+            basis = scan.basis(chosen[:j] + chosen[j + 1 :])
             r_now = scan.residual(basis)
             grid = chosen[j] * np.linspace(0.94, 1.06, 61)
-            grid = grid[[resolvable(float(p), others, scan.span_s) for p in grid]]
-            if grid.size == 0:
-                continue
             _, p_best = _first_best(grid, scan.gains(grid, r_now, basis), -1.0)
             chosen[j] = p_best if p_best else chosen[j]
         if chosen == before:
@@ -203,22 +169,12 @@ def _grow_beam(
     r_now = scan.residual(basis)
     rss_now = float(r_now @ r_now)
     free = np.array(
-        [
-            resolvable(float(p), chosen, scan.span_s)
-            and not any(abs(float(p) / c - 1.0) < 0.05 for c in chosen)
-            for p in periods
-        ],
-        bool,
+        [not any(abs(float(p) / c - 1.0) < 0.05 for c in chosen) for p in periods], bool
     )
-    if not np.any(free):
-        return
     for start in _gain_peaks(periods[free], scan.gains(periods[free], r_now, basis), ATTITUDE_BEAM):
         # Refine the period on a fine grid (+-2.5 %): phase errors grow over the
         # held-out span.
         fine = start * np.linspace(0.975, 1.025, 51)
-        fine = fine[[resolvable(float(p), chosen, scan.span_s) for p in fine]]
-        if fine.size == 0:
-            continue
         g_fine = scan.gains(fine, r_now, basis)
         i = int(np.argmax(g_fine))
         period, gain = float(fine[i]), float(g_fine[i])
@@ -293,8 +249,6 @@ class AttitudeScan:
         idx = np.flatnonzero(train)
         self.idx = idx[:: max(1, -(-idx.size // SCAN_MAX_SAMPLES))]
         self.t = data.t_utc_s[self.idx] - float(data.t_utc_s[self.idx[0]])
-        #: The training span the periods are told apart on [s] (:func:`resolvable`).
-        self.span_s = float(data.t_utc_s[idx[-1]] - data.t_utc_s[idx[0]])
         self.y = data.b_raw_nt[self.idx].reshape(-1)
         self.n = int(self.idx.size)
         # Per block, what no period changes: the rotation columns, their products R^T R and the
