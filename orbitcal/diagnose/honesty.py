@@ -361,7 +361,7 @@ class Review:
     immaterial: list[str] = field(default_factory=list)
     correlated: list[str] = field(default_factory=list)
     weak: list[str] = field(default_factory=list)
-    wander: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+    wander: dict[str, tuple[float, float]] = field(default_factory=dict)
     blockless: list[str] = field(default_factory=list)
     gap_unexplained: bool = False
     verdict: str = "none"
@@ -667,7 +667,7 @@ def _wander(
     fit_names: Sequence[str],
     keep: Sequence[str],
     final: _Final,
-) -> dict[str, tuple[float, float, float]]:
+) -> dict[str, tuple[float, float]]:
     """The kept effects with a field in the final fit that are within the slow wander of the
     noise (:func:`orbitcal.diagnose.wander.within_wander`), judged on the training samples the
     fits used (quiet latitudes beside auroral currents, which no block models there)."""

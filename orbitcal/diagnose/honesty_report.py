@@ -206,10 +206,8 @@ def _mark_withdrawn(report: dict[str, Any], att: Attribution, rv: Review) -> Non
             "named by its own regional test, but its fitted model predicted the held-out "
             "blocks worse than none: the final model leaves it out"
         )
-    for name, (variation, wander, slow) in rv.wander.items():
-        _withdraw(
-            by_name, [name], "wander", "wander_reason", wander_reason(variation, wander, slow)
-        )
+    for name, (variation, wander) in rv.wander.items():
+        _withdraw(by_name, [name], "wander", "wander_reason", wander_reason(variation, wander))
     _withdraw(
         by_name,
         rv.weak,

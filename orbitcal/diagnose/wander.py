@@ -10,20 +10,11 @@ What tells them apart is on the training samples. A real effect, once modelled, 
 whose average over half an hour is flat (what is left is white noise averaged over a few hundred
 samples); a wander leaves such averages of the size of what the effect drew from it. So over spans
 of at least :data:`WANDER_MIN_SPAN_S`, an effect whose fitted field (its variation over every
-sample the fits use, RMS per component) is less than ``s /`` :data:`WANDER_RATIO` times the
+sample the fits use, RMS per component) is less than ``1 /`` :data:`WANDER_RATIO` times the
 :data:`WANDER_WINDOW_S` moving average of the final model's training residual (RMS per component)
 cannot be told from the noise and is withdrawn (``status: "wander"``); a field that follows a
-telemetry column or a published model (:data:`WITNESSED`) only when it is smaller than ``s``
-times the wander itself (:data:`WITNESSED_RATIO`).
-
-``s`` (:func:`slow_fraction`) is the share of the fitted field's variation that its own
-half-hour average keeps. A wander ``w`` is slow, and a template fitted to it takes its projection
-``f = P w``: ``|f|^2 = <f, w>``, and ``w`` meets only ``f``'s slow part, so ``|f| <= s |w|``.
-A field that turns with a tumbling body (``s`` near 0) is far larger than anything a wander can
-draw into it; compared with the wander alone, attitude errors of 5-17 nT on tumbling bodies
-beside a wander of 1.2-7.9 nT were withdrawn (independent worlds 9800 no. 13, 10100 no. 9,
-10300 no. 4). For slow fields (``s`` near 1: drifts, a storm's trend, orbit errors under nadir)
-the test is as before.
+telemetry column or a published model (:data:`WITNESSED`) only when it is smaller than the wander
+itself (:data:`WITNESSED_RATIO`).
 
 The ratio (wander / variation) measured when the test was added: real effects 0.005-0.057
 (eight parameter-drift worlds of ``orbitcal simulate`` at magnitude 0.5 and 1, nadir and
@@ -98,11 +89,10 @@ def within_wander(
     samples: BoolArray,
     span_s: float,
     field_samples: BoolArray | None = None,
-) -> dict[str, tuple[float, float, float]]:
+) -> dict[str, tuple[float, float]]:
     """The effects of ``fields_nt`` (name -> fitted field at every sample) within the noise's
     wander on ``samples`` (training): name -> (its field's variation on ``field_samples``, all
-    samples by default, the wander [nT], the field's slow share on ``samples``
-    (:func:`slow_fraction`)), for those whose variation is below the wander x the slow share /
+    samples by default, the wander) [nT], for those whose variation is below the wander /
     :data:`WANDER_RATIO`. The variation is taken beyond the training samples: a field that is
     flat there (a sensor temperature that starts changing in the held-out blocks) would
     otherwise count as none."""
@@ -116,32 +106,17 @@ def within_wander(
     for name, f in fields_nt.items():
         variation = field_variation_nt(f[where])
         ratio = WITNESSED_RATIO if name in WITNESSED else WANDER_RATIO
-        slow = slow_fraction(t_s[samples], f[samples])
-        if wander * slow > ratio * variation:
-            out[name] = (variation, wander, slow)
+        if wander > ratio * variation:
+            out[name] = (variation, wander)
     return out
 
 
-def slow_fraction(t_s: FloatArray, field_nt: FloatArray) -> float:
-    """The share of a fitted field's variation that a slow wander can draw: the RMS variation
-    of its :data:`WANDER_WINDOW_S` moving average over its own RMS variation, in [0, 1] (1 when
-    no window fits in the span)."""
-    total = field_variation_nt(field_nt)
-    avg, full = moving_average(t_s, field_nt, WANDER_WINDOW_S)
-    if not np.any(full) or not total > 0.0:
-        return 1.0
-    return float(min(1.0, field_variation_nt(avg[full]) / total))
-
-
-def wander_reason(variation_nt: float, wander_nt: float, slow: float = 1.0) -> str:
+def wander_reason(variation_nt: float, wander_nt: float) -> str:
     """The words of a withdrawal for being within the noise's wander."""
-    share = (
-        f", {slow:.0%} of it slow enough for a half-hour average to keep," if slow < 0.995 else ""
-    )
     return (
-        f"its fitted field varies by {variation_nt:.3g} nT (RMS per component){share} where "
-        f"the final model's training residual, averaged over {WANDER_WINDOW_S / 60:.0f} min, "
-        f"still wanders by {wander_nt:.3g} nT: a field this small beside that wander is what a "
-        "slowly wandering offset (random-walk or 1/f noise) draws, and the held-out blocks "
-        "cannot tell it from one"
+        f"its fitted field varies by {variation_nt:.3g} nT (RMS per component) where the final "
+        f"model's training residual, averaged over {WANDER_WINDOW_S / 60:.0f} min, still wanders "
+        f"by {wander_nt:.3g} nT: a field this small beside that wander is what a slowly "
+        "wandering offset (random-walk or 1/f noise) draws, and the held-out blocks cannot tell "
+        "it from one"
     )
