@@ -224,7 +224,7 @@ def _mark_withdrawn(report: dict[str, Any], att: Attribution, rv: Review) -> Non
         "withdrawn",
         "withdrawn_reason",
         "significant only beside "
-        + ", ".join(rv.inseparable + [r["effect"] for r in residues])
+        + ", ".join(_withdrawn_before_orphans(rv))
         + ": without them it no longer shrinks the held-out residual significantly",
     )
     _withdraw(
@@ -257,6 +257,20 @@ def _final_section(
     report["effects"] = [by_name[n] for n in keep] + [
         e for e in report["effects"] if e["name"] not in keep
     ]
+
+
+def _withdrawn_before_orphans(rv: Review) -> list[str]:
+    """The effects whose withdrawal can leave another significant only beside them: not
+    separable, unlit, possible residues, then those of the correlated-chunk and wander tests
+    (each once, in that order)."""
+    names = [
+        *rv.inseparable,
+        *rv.unlit,
+        *(r["effect"] for r in rv.residues if r["possible_residue"]),
+        *rv.correlated,
+        *rv.wander,
+    ]
+    return list(dict.fromkeys(names))
 
 
 def _honesty_section(rv: Review) -> dict[str, Any]:
