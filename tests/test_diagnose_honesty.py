@@ -364,6 +364,23 @@ def test_a_selection_overshadowed_by_an_inseparable_candidate_is_withdrawn() -> 
     from orbitcal.diagnose.honesty import inseparable_candidates
 
     assert inseparable_candidates(att) == ["sun_driven"]  # a separable candidate is not listed
+    # The verdict names it among what the span cannot separate from the calibration, and why
+    # (the storm pass through a slow tumble, seed 4100 no. 15: the external field withdrawn so
+    # left a "none" naming only a drift and a nonlinearity beside 316 nT held out).
+    from orbitcal.diagnose.honesty_report import review_report
+
+    doc = _report(att, "time_offset", 1.0)
+    for e in att.effects[1:]:
+        doc["effects"].append(
+            {**doc["effects"][0], "name": e.name, "significant": False, "status": "not significant"}
+        )
+    report = review_report(doc, data, att, rv=rv)
+    status = report["verdict_status"]
+    assert status.startswith("none: ") and "sun_driven would shrink it" in status
+    overshadowed = status.split("; ")[1]
+    assert overshadowed.startswith("time_offset would shrink it too"), status
+    assert "cannot be separated from the calibration on this span either" in overshadowed
+    assert report["effects"][0]["status"] == "overshadowed"
 
 
 def _walk(rng: np.random.Generator, n: int) -> np.ndarray:

@@ -41,6 +41,10 @@ GAP_TIMES_NOISE = 1.5
 #: uniform external field, a time shift, a drift and a stray field all look like a change of
 #: scale and offset there), so none of them can be named.
 INSEPARABLE_LIMIT = 0.99
+#: A candidate the span cannot tell from the calibration that leaves less than 1 / this of the
+#: selected model's held-out residual overshadows the selection
+#: (:func:`orbitcal.diagnose.honesty._overshadowed`).
+OVERSHADOW_RATIO = 2.0
 #: As :data:`orbitcal.diagnose.report.FIRM_CONFIDENCE`: below it a verdict is not stable.
 FIRM_CONFIDENCE = 0.8
 
@@ -192,8 +196,14 @@ def gap_section(
                 if one
                 else "cannot tell which (if any) is present"
             )
+            + _overshadowed_too(report["effects"])
             + "; what would decide: "
-            + deciders(inseparable)
+            + deciders(
+                [
+                    *inseparable,
+                    *(e["name"] for e in report["effects"] if e.get("status") == "overshadowed"),
+                ]
+            )
         )
     if unexplained:
         gap["statement"] = (
@@ -273,6 +283,25 @@ def verdict_status(
             f"parameters); what would separate it: {separation[verdict]['would_separate']}"
         )
         report["verdict_confidence_of"] = "presence"
+
+
+def _overshadowed_too(effects: Sequence[dict[str, Any]]) -> str:
+    """The clause naming the candidates withdrawn as overshadowed by one the calibration cannot
+    be told from: they shrink the held-out residual too, but their gain cannot be separated from
+    the calibration's misfit on this span either (the storm pass through a slow tumble: the
+    external field took it from 316 to 38 nT per component, a drift of the 12 parameters to 22
+    nT, and the report named neither the storm nor why)."""
+    over = [e for e in effects if e.get("status") == "overshadowed"]
+    if not over:
+        return ""
+    one = len(over) == 1
+    return (
+        f"; {', '.join(e['name'] for e in over)} would shrink it too, but a change of the "
+        f"calibration explains it more than {OVERSHADOW_RATIO:g} x better than the model with "
+        f"{'it' if one else 'them'}: "
+        f"{'its' if one else 'their'} gain cannot be separated from the calibration on this "
+        "span either"
+    )
 
 
 def _taken_whole(names: Sequence[str], *, also: bool = False) -> str:

@@ -79,6 +79,7 @@ from orbitcal.diagnose.confounding import sun_driven_without_eclipse
 from orbitcal.diagnose.gap import (
     GAP_TIMES_NOISE,
     INSEPARABLE_LIMIT,
+    OVERSHADOW_RATIO,
     noise_floor_nt,
     noise_ratio,
 )
@@ -118,9 +119,6 @@ FLEXIBLE = frozenset({"attitude_error", "sun_driven", "magnetorquer", "nonlinear
 SHORT_SPAN_FLEXIBLE = frozenset({"time_offset", "parameter_drift"})
 #: Effects judged by their own tests, not by the held-out blocks (never demoted here).
 OWN_TEST = frozenset({"field_aligned_currents"})
-#: A candidate the span cannot tell from the calibration that leaves less than 1 / this of the
-#: selected model's held-out residual overshadows the selection (:func:`_overshadowed`).
-OVERSHADOW_RATIO = 2.0
 #: On a span shorter than an orbit, an effect whose own share of the held-out RMS is below
 #: :data:`MATERIAL_GAIN` while the final held-out residual stays above
 #: :data:`LARGE_GAP_TIMES_NOISE` times the noise floor is immaterial (:func:`_immaterial`).
