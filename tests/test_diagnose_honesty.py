@@ -498,3 +498,17 @@ def test_the_blocks_of_the_final_fit_are_named_as_the_attribution_recorded_them(
     assert _fit_names(guessed) == ["time_offset", "field_aligned_currents"]  # the old guess
     wrong_length = dataclasses.replace(guessed, final_block_names=["time_offset"])
     assert _fit_names(wrong_length) == []
+
+
+def test_intervals_are_rounded_outward_on_the_report_grid() -> None:
+    """A 90 % interval is stated on the report's 1e-4 grid rounded outward: rounded to nearest,
+    a bound moved inward by up to 5e-5 s, a sixtieth of a time offset's interval of a few ms
+    (independent world 10400 no. 14: [0.303, 0.3061] beside a truth of 0.30617 s; outward,
+    [0.303, 0.3062])."""
+    from orbitcal.diagnose.report import _outward
+
+    assert _outward([0.30304, 0.30614]) == [0.303, 0.3062]
+    assert _outward([-0.43241, -0.42698]) == [-0.4325, -0.4269]
+    # values on the grid (a physical bound the fit reached) stay where they are
+    assert _outward([-5.0, 0.2]) == [-5.0, 0.2] and _outward([0.3061, 0.3061]) == [0.3061, 0.3061]
+    assert _outward([float("nan"), 1.0]) == [None, 1.0]
