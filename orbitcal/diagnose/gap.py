@@ -182,6 +182,7 @@ def gap_section(
         "inseparable": list(inseparable),
     }
     if inseparable:
+        overshadowed = [e["name"] for e in report["effects"] if e.get("status") == "overshadowed"]
         one = len(inseparable) == 1
         gap["inseparable_statement"] = (
             f"the held-out residual ({rms:.3g} nT per component, {times:.1f} x the noise floor) "
@@ -196,14 +197,9 @@ def gap_section(
                 if one
                 else "cannot tell which (if any) is present"
             )
-            + _overshadowed_too(report["effects"])
+            + _overshadowed_too(overshadowed)
             + "; what would decide: "
-            + deciders(
-                [
-                    *inseparable,
-                    *(e["name"] for e in report["effects"] if e.get("status") == "overshadowed"),
-                ]
-            )
+            + deciders([*inseparable, *overshadowed])
         )
     if unexplained:
         gap["statement"] = (
@@ -285,18 +281,17 @@ def verdict_status(
         report["verdict_confidence_of"] = "presence"
 
 
-def _overshadowed_too(effects: Sequence[dict[str, Any]]) -> str:
+def _overshadowed_too(over: Sequence[str]) -> str:
     """The clause naming the candidates withdrawn as overshadowed by one the calibration cannot
     be told from: they shrink the held-out residual too, but their gain cannot be separated from
     the calibration's misfit on this span either (the storm pass through a slow tumble: the
     external field took it from 316 to 38 nT per component, a drift of the 12 parameters to 22
     nT, and the report named neither the storm nor why)."""
-    over = [e for e in effects if e.get("status") == "overshadowed"]
     if not over:
         return ""
     one = len(over) == 1
     return (
-        f"; {', '.join(e['name'] for e in over)} would shrink it too, but a change of the "
+        f"; {', '.join(over)} would shrink it too, but a change of the "
         f"calibration explains it more than {OVERSHADOW_RATIO:g} x better than the model with "
         f"{'it' if one else 'them'}: "
         f"{'its' if one else 'their'} gain cannot be separated from the calibration on this "
