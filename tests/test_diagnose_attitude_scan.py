@@ -28,7 +28,7 @@ def attitude_and_time_offset():
 
 
 def _periods(block: DesignBlock) -> list[float]:
-    return sorted(float(p) for p in block.variant.split("=")[1].split(","))
+    return sorted(float(p) for p in block.variant.split("=")[1].split(" and")[0].split(","))
 
 
 def test_periods_found_beside_the_time_offset_are_the_injected_ones(attitude_and_time_offset):
@@ -69,12 +69,14 @@ def attitude_time_offset_external():
 
 
 @pytest.mark.parametrize("beam", [1, 3])
-def test_beam_search_finds_the_periods_a_greedy_scan_locks_out(
+def test_periods_found_beside_the_time_offset_and_the_ring_current(
     attitude_time_offset_external, monkeypatch, beam
 ):
-    """Beside the time offset and the ring current, the greedy scan (a beam of one) takes a first
-    period from the mixture of the three sinusoids and ends at 6,576 / 4,238 / 9,189 s, twice the
-    training residual of the injected periods; a beam of three sets finds them."""
+    """Beside the time offset and the ring current, the greedy scan (a beam of one) took a first
+    period from the mixture of the three sinusoids and ended at 6,576 / 4,238 / 9,189 s, twice the
+    training residual of the injected periods; a beam of three sets found them. Since the
+    attitude error has a drift (a linear trend of dtheta, in the scan's projection), the greedy
+    scan finds them too; the beam stays for mixtures the drift does not take apart."""
     import orbitcal.diagnose.attitude_scan as attitude_scan
 
     data, train = attitude_time_offset_external
@@ -87,5 +89,6 @@ def test_beam_search_finds_the_periods_a_greedy_scan_locks_out(
     block = design_attitude(data, train, fixed=fixed)
     assert block is not None
     found = _periods(block)
-    close = np.allclose(found, INJECTED_PERIODS_S, rtol=0.01)
-    assert close == (beam > 1), found
+    # 2 %: the drift takes a little of the slow part of the three sinusoids (5,484 s is found
+    # for 5,400 s)
+    np.testing.assert_allclose(found, INJECTED_PERIODS_S, rtol=0.02)

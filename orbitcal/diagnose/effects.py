@@ -498,7 +498,8 @@ CATALOGUE: tuple[Effect, ...] = (
     Effect(
         "attitude_error",
         "a slowly varying attitude error dtheta(t): db = dtheta x B, dtheta a sum of up to three "
-        "sinusoids with periods found on the training blocks",
+        "sinusoids with periods found on the training blocks and a drift held at its last value "
+        "after them",
         "vector residual perpendicular to B while the scalar residual stays clean",
         design_attitude,
         absorbed_by_calibration=True,
