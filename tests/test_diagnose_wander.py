@@ -75,6 +75,36 @@ def test_a_small_field_beside_a_wandering_residual_is_within_the_noise() -> None
     assert np.isnan(slow_wander_nt(t[few], wandering[few]))
 
 
+def test_a_rotation_is_judged_on_the_wander_along_the_main_field() -> None:
+    """An attitude error's field is across B; the remainder of one the model follows only in
+    part wanders across B too, where no wandering offset is needed to explain it. Beside a
+    wandering offset (along B as much as across) the same field is within the noise."""
+    t = np.arange(0.0, 6 * 3600.0, 10.0)
+    n = t.size
+    samples = np.ones(n, dtype=bool)
+    phase = 2 * np.pi * t / 5650.0
+    b_unit = np.column_stack([np.cos(phase), np.zeros(n), np.sin(phase)])  # nadir-like
+    across = np.cross([0.0, 1.0, 0.0], b_unit)  # unit vectors across B, in the orbit plane
+    field = 12.0 * np.sin(2 * phase)[:, None] * across  # ~6 nT RMS per component
+    rng = np.random.default_rng(4)
+    white = rng.normal(scale=1.5, size=(n, 3))
+    walk = _walk(n, 5, 3.0)
+    remainder = white + np.einsum("ij,ij->i", walk, across)[:, None] * across
+    offset_walk = white + walk
+    name = "attitude_error"
+    assert within_wander(t, remainder, {name: field}, samples, float(t[-1]), b_unit=b_unit) == {}
+    assert name in within_wander(t, remainder, {name: field}, samples, float(t[-1]))
+    found = within_wander(t, offset_walk, {name: field}, samples, float(t[-1]), b_unit=b_unit)
+    assert name in found
+    # the along-B wander of an isotropic walk is the per-component wander
+    assert found[name][1] == pytest.approx(slow_wander_nt(t, offset_walk), rel=0.5)
+    # effects with a field along B are judged on the whole residual as before
+    drift = np.outer(t / t[-1], [20.0, -15.0, 10.0])
+    assert "parameter_drift" in within_wander(
+        t, remainder, {"parameter_drift": 0.2 * drift}, samples, float(t[-1]), b_unit=b_unit
+    )
+
+
 def test_spikes_do_not_make_a_wander() -> None:
     t = np.arange(0.0, 6 * 3600.0, 10.0)
     rng = np.random.default_rng(3)

@@ -32,7 +32,7 @@ from orbitcal.diagnose.honesty import (
     inseparable_candidates,
     review,
 )
-from orbitcal.diagnose.wander import wander_reason
+from orbitcal.diagnose.wander import ACROSS_B, wander_reason
 
 if TYPE_CHECKING:  # pragma: no cover
     from orbitcal.diagnose.attribution import Attribution
@@ -207,7 +207,8 @@ def _mark_withdrawn(report: dict[str, Any], att: Attribution, rv: Review) -> Non
             "blocks worse than none: the final model leaves it out"
         )
     for name, (variation, wander) in rv.wander.items():
-        _withdraw(by_name, [name], "wander", "wander_reason", wander_reason(variation, wander))
+        reason = wander_reason(variation, wander, along_b=name in ACROSS_B)
+        _withdraw(by_name, [name], "wander", "wander_reason", reason)
     _withdraw(
         by_name,
         rv.weak,

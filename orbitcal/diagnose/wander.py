@@ -51,6 +51,13 @@ WANDER_CLIP_SIGMA = 5.0
 #: at 2.3.
 WITNESSED = frozenset({"temperature", "magnetorquer", "crustal_field"})
 WITNESSED_RATIO = 1.0
+#: Effects whose field is perpendicular to the main field (a rotation: db = dtheta x B). A
+#: wandering sensor offset wanders along B as much as across it, so for these the wander is
+#: read on the residual's component along B alone: an attitude error that wanders (a random walk
+#: the model follows only in part) leaves its remainder across B, where it is no sign of a
+#: wandering offset. (Independent worlds 10600 no. 4 and 10900 no. 15: real attitude errors of
+#: 14 and 22 nT withdrawn beside 2.4 and 3.4 nT of wander, most of it their own remainder.)
+ACROSS_B = frozenset({"attitude_error"})
 
 
 def moving_average(t_s: FloatArray, x: FloatArray, window_s: float) -> tuple[FloatArray, BoolArray]:
@@ -89,33 +96,43 @@ def within_wander(
     samples: BoolArray,
     span_s: float,
     field_samples: BoolArray | None = None,
+    b_unit: FloatArray | None = None,
 ) -> dict[str, tuple[float, float]]:
     """The effects of ``fields_nt`` (name -> fitted field at every sample) within the noise's
     wander on ``samples`` (training): name -> (its field's variation on ``field_samples``, all
     samples by default, the wander) [nT], for those whose variation is below the wander /
     :data:`WANDER_RATIO`. The variation is taken beyond the training samples: a field that is
     flat there (a sensor temperature that starts changing in the held-out blocks) would
-    otherwise count as none."""
+    otherwise count as none. With ``b_unit`` (the main field's direction at every sample), the
+    effects of :data:`ACROSS_B` are judged against the wander of the residual along it."""
     if span_s < WANDER_MIN_SPAN_S or int(samples.sum()) < 10:
         return {}
     where = np.ones(t_s.size, dtype=bool) if field_samples is None else field_samples
     wander = slow_wander_nt(t_s[samples], residual_nt[samples])
     if not np.isfinite(wander):
         return {}
+    along = wander
+    if b_unit is not None and any(name in ACROSS_B for name in fields_nt):
+        r_par = np.einsum("ij,ij->i", residual_nt[samples], b_unit[samples])[:, None]
+        along = slow_wander_nt(t_s[samples], r_par)
+        along = along if np.isfinite(along) else wander
     out = {}
     for name, f in fields_nt.items():
         variation = field_variation_nt(f[where])
         ratio = WITNESSED_RATIO if name in WITNESSED else WANDER_RATIO
-        if wander > ratio * variation:
-            out[name] = (variation, wander)
+        w = along if name in ACROSS_B else wander
+        if w > ratio * variation:
+            out[name] = (variation, w)
     return out
 
 
-def wander_reason(variation_nt: float, wander_nt: float) -> str:
-    """The words of a withdrawal for being within the noise's wander."""
+def wander_reason(variation_nt: float, wander_nt: float, *, along_b: bool = False) -> str:
+    """The words of a withdrawal for being within the noise's wander (``along_b``: the wander
+    of the residual's component along the main field, for the effects of :data:`ACROSS_B`)."""
+    which = "training residual along the main field" if along_b else "training residual"
     return (
         f"its fitted field varies by {variation_nt:.3g} nT (RMS per component) where the final "
-        f"model's training residual, averaged over {WANDER_WINDOW_S / 60:.0f} min, still wanders "
+        f"model's {which}, averaged over {WANDER_WINDOW_S / 60:.0f} min, still wanders "
         f"by {wander_nt:.3g} nT: a field this small beside that wander is what a slowly "
         "wandering offset (random-walk or 1/f noise) draws, and the held-out blocks cannot tell "
         "it from one"
