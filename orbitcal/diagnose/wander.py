@@ -55,8 +55,9 @@ WITNESSED_RATIO = 1.0
 #: wandering sensor offset wanders along B as much as across it, so for these the wander is
 #: read on the residual's component along B alone: an attitude error that wanders (a random walk
 #: the model follows only in part) leaves its remainder across B, where it is no sign of a
-#: wandering offset. (Independent worlds 10600 no. 4 and 10900 no. 15: real attitude errors of
-#: 14 and 22 nT withdrawn beside 2.4 and 3.4 nT of wander, most of it their own remainder.)
+#: wandering offset. (Independent world 10900 no. 15: a real attitude error of 22 nT was
+#: withdrawn beside 3.4 nT of wander, most of it its own remainder. In 10600 no. 4 an unmodelled
+#: temperature wanders along B too, and the attitude error beside it stays withdrawn.)
 ACROSS_B = frozenset({"attitude_error"})
 
 
