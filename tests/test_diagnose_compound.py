@@ -263,8 +263,8 @@ def test_a_drift_step_time_is_refined_between_the_grid_times(real_tles_text: str
     reason=(
         "since the attitude error has a drift and forecast-chosen periods (2026-11-27), the "
         "temperature is not found beside the bias step and the attitude error (both named, 2 of "
-        "3): a known loss, traded for 17 -> 8 attitude errors missed on independent seeds "
-        "10400-10900 (benchmarks/results/diagnose_independent.md)"
+        "3): a known loss, traded for 17 -> 4 of 36 attitude errors missed on independent "
+        "seeds 10400-10900 (benchmarks/results/diagnose_independent.md)"
     ),
 )
 def test_an_attitude_error_chosen_alone_is_chosen_again_with_the_others(
