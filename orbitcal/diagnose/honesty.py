@@ -683,10 +683,14 @@ def _wander(
     names = [n for n in fit_names if n in keep]  # the blocks of ``final.fit``, in order
     fields = {n: final.fit.effect_nt(k) for k, n in enumerate(names) if n not in OWN_TEST}
     used = _fit_samples(data, att)
-    b = data.b_ref_body_nt
-    b_unit = b / np.maximum(np.linalg.norm(b, axis=1, keepdims=True), 1e-9)
     return within_wander(
-        data.t_utc_s, final.residual_nt, fields, att.train & used, att.span_s, used, b_unit
+        data.t_utc_s,
+        final.residual_nt,
+        fields,
+        att.train & used,
+        att.span_s,
+        used,
+        data.b_hat_body,
     )
 
 

@@ -14,7 +14,8 @@ sample the fits use, RMS per component) is less than ``1 /`` :data:`WANDER_RATIO
 :data:`WANDER_WINDOW_S` moving average of the final model's training residual (RMS per component)
 cannot be told from the noise and is withdrawn (``status: "wander"``); a field that follows a
 telemetry column or a published model (:data:`WITNESSED`) only when it is smaller than the wander
-itself (:data:`WITNESSED_RATIO`).
+itself (:data:`WITNESSED_RATIO`). A field across the main field (an attitude error,
+:data:`ACROSS_B`) is judged against the wander of the residual's component along it.
 
 The ratio (wander / variation) measured when the test was added: real effects 0.005-0.057
 (eight parameter-drift worlds of ``orbitcal simulate`` at magnitude 0.5 and 1, nadir and
@@ -115,8 +116,7 @@ def within_wander(
     along = wander
     if b_unit is not None and any(name in ACROSS_B for name in fields_nt):
         r_par = np.einsum("ij,ij->i", residual_nt[samples], b_unit[samples])[:, None]
-        along = slow_wander_nt(t_s[samples], r_par)
-        along = along if np.isfinite(along) else wander
+        along = slow_wander_nt(t_s[samples], r_par)  # finite: the same windows as ``wander``
     out = {}
     for name, f in fields_nt.items():
         variation = field_variation_nt(f[where])
