@@ -312,17 +312,17 @@ def _taken_whole(names: Sequence[str], *, also: bool = False) -> str:
 
 
 def _unmodelled(named: Sequence[str]) -> str:
-    """What explains the gap: nothing, or effects named by their own test whose fitted model
-    the final fit left out (it predicted the held-out blocks worse than none)."""
+    """What explains the gap: nothing, or named effects whose fitted model the final fit left
+    out (auroral currents whose model predicted the held-out crossings worse than none, or
+    effects named on the quiet latitudes beside them)."""
     if not named:
         return "no candidate explains it"
     one = len(named) == 1
     return (
-        f"{', '.join(named)} {'is' if one else 'are'} named by "
-        f"{'its' if one else 'their'} own test but {'has' if one else 'have'} no model in the "
-        "final fit (fitted on the training blocks, it predicted the held-out blocks worse than "
-        f"none), so {'its' if one else 'their'} field stays in this residual; no other "
-        "candidate explains it"
+        f"{', '.join(named)} {'is' if one else 'are'} named but {'has' if one else 'have'} no "
+        "model in the final fit (each one's model_left_out_reason says why), so "
+        f"{'its' if one else 'their'} field stays in this residual; no other candidate "
+        "explains it"
     )
 
 

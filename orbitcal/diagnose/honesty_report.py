@@ -33,6 +33,7 @@ from orbitcal.diagnose.honesty import (
     review,
 )
 from orbitcal.diagnose.wander import ACROSS_B, wander_reason
+from orbitcal.metrics import rms_nt_from_norm
 
 if TYPE_CHECKING:  # pragma: no cover
     from orbitcal.diagnose.attribution import Attribution
@@ -203,8 +204,12 @@ def _mark_withdrawn(report: dict[str, Any], att: Attribution, rv: Review) -> Non
     )
     for name in rv.blockless:
         by_name[name]["model_left_out_reason"] = (
-            "named by its own regional test, but its fitted model predicted the held-out "
-            "blocks worse than none: the final model leaves it out"
+            _quiet_only_words(rv.quiet_only[name])
+            if name in rv.quiet_only
+            else (
+                "named by its own regional test, but its fitted model predicted the held-out "
+                "blocks worse than none: the final model leaves it out"
+            )
         )
     for name, (variation, wander) in rv.wander.items():
         reason = wander_reason(variation, wander, along_b=name in ACROSS_B)
@@ -294,6 +299,18 @@ def _honesty_section(rv: Review) -> dict[str, Any]:
     }
 
 
+def _quiet_only_words(rms: tuple[float, float, float, float]) -> str:
+    """Why an effect judged on quiet latitudes is named without a model in the final fit."""
+    with_q, base_q, with_all, base_all = (rms_nt_from_norm(x) for x in rms)
+    return (
+        "named where it was judged, on quiet magnetic latitudes beside the auroral currents: "
+        f"there the final model with it holds the held-out residual to {with_q:.4g} nT "
+        f"against {base_q:.4g} nT for the calibration alone; on every held-out sample, where "
+        "the currents' unmodelled field dominates, it was not better "
+        f"({with_all:.6g} against {base_all:.6g} nT), so the final model leaves it out"
+    )
+
+
 def _fall_back_words(rv: Review) -> str:
     if not rv.fell_back:
         return "the final model is no worse than the calibration alone on the held-out blocks"
@@ -301,10 +318,18 @@ def _fall_back_words(rv: Review) -> str:
     parts = []
     if rv.withdrawn:
         parts.append(f"{', '.join(rv.withdrawn)} withdrawn")
-    if rv.blockless:
+    own = [n for n in rv.blockless if n not in rv.quiet_only]
+    if own:
         parts.append(
-            f"{', '.join(rv.blockless)} left out of the final model but still named by "
+            f"{', '.join(own)} left out of the final model but still named by "
             "their own regional test (their fitted model did not predict the held-out "
             "crossings)"
+        )
+    if rv.quiet_only:
+        one = len(rv.quiet_only) == 1
+        parts.append(
+            f"{', '.join(rv.quiet_only)} left out of the final model but still named on the "
+            f"quiet latitudes where {'it was' if one else 'they were'} judged (see "
+            f"{'its' if one else 'each one' + chr(39) + 's'} model_left_out_reason)"
         )
     return out + "; ".join(parts)
