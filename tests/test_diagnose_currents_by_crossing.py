@@ -117,3 +117,14 @@ def test_an_effect_judged_on_quiet_latitudes_stays_named_beside_such_currents(
     else:
         assert effect in report["final"]["effects"]
 
+
+def test_currents_beside_a_storm_are_not_called_weak() -> None:
+    """Whether the currents are weak is read on what the other kept effects leave: beside an
+    unmodelled storm field (here 3x a storm's, uniform along the dipole axis on a tumbling body)
+    the calibration's residual is as large at quiet latitudes as at auroral ones, and 150 nT of
+    currents were withdrawn as "weak" (independent world 11000 no. 8, at feb40d2)."""
+    data = _with_currents_by_crossing("tumbling", 2, "external_field", 3.0, 150.0)
+    report = diagnose_data(data, rng=np.random.default_rng(0)).report.to_json()  # type: ignore[arg-type]
+    significant = {e["name"] for e in report["effects"] if e["significant"]}
+    assert {"external_field", "field_aligned_currents"} <= significant
+    assert report["honesty"]["weak"] == []
