@@ -159,14 +159,15 @@ def _real_runs(runs: list[tuple[str, dict]]) -> list[str]:
 def _pooled(specs: list[str]) -> list[str]:
     """One row per ``LABEL=FILE,FILE,...``: recall, worlds with a spurious effect, verdict among
     the injected and null false alarms over the worlds of all the files, as ``run_worlds.py``'s
-    :func:`summarise` counts them (the README's row), and the recall that also credits named
-    twins (``-`` for files written before it was scored)."""
+    :func:`summarise` counts them (the README's row), the recall that also credits named twins
+    and how many injected effects the observability oracle finds observable (``-`` for files
+    written before these were scored)."""
     from run_worlds import summarise
 
     out = [
         "| | recall | worlds with a spurious effect | verdict among injected | null false alarms |"
-        " recall counting named twins |",
-        "|---|---:|---:|---:|---:|---:|",
+        " recall counting named twins | observable effects (oracle.py) |",
+        "|---|---:|---:|---:|---:|---:|---:|",
     ]
     for spec in specs:
         label, paths = spec.split("=", 1)
@@ -186,6 +187,11 @@ def _pooled(specs: list[str]) -> list[str]:
             + (
                 f" {share(s['recall_with_twins'], n_inj)} |"
                 if s["recall_with_twins"] is not None
+                else " - |"
+            )
+            + (
+                f" {s['observable_effects']} of {n_inj} |"
+                if s["observable_effects"] is not None
                 else " - |"
             )
         )

@@ -266,6 +266,8 @@ class World:
     truth: dict[str, float] = field(default_factory=dict)
     noise: str = "white"
     sensor: Sensor | None = None
+    #: The element set the truth was propagated from (the user is given ``tle_given``).
+    tle_truth: TleSet | None = None
 
     def write(self, table: Path, tle: Path) -> None:
         write_table(table, self.t_unix_s, self.b_raw_nt, self.body_to_gcrs, None, self.extra)
@@ -280,8 +282,19 @@ def make_world(
     small_unmodelled: bool = False,
     orbits: float = 4.0,
     cadence_s: float = 10.0,
+    exclude: frozenset[str] = frozenset(),
 ) -> World:
-    """One world: ``effects`` injected at drawn strengths, ``noise`` of the given kind."""
+    """One world: ``effects`` injected at drawn strengths, ``noise`` of the given kind.
+
+    ``exclude``: effects drawn (every random number as without it, so the same seed gives the
+    same world otherwise) but not applied: the world without them, for the observability oracle
+    (``oracle.py``). The attitude the table gives, the user's element set and the thermistor and
+    torquer columns stay those of the whole world.
+    """
+
+    def on(name: str) -> bool:
+        return name in effects and name not in exclude
+
     pairs = tle_pairs()
     if "field_aligned_currents" in effects:
         pairs = [p for p in pairs if p[0].norad != 25544]  # polar orbits only
@@ -296,8 +309,10 @@ def make_world(
     if "time_offset" in effects:
         dt_true = float(rng.choice([-1.0, 1.0]) * rng.uniform(0.2, 1.0))
         truth["dt_s"] = dt_true
-    r_true = propagate_itrs_km(newer, t + dt_true)
-    b_itrs = igrf14_itrs_nt(t + dt_true, r_true)
+    dt_used = dt_true if on("time_offset") else 0.0
+    r_whole = propagate_itrs_km(newer, t + dt_true)  # the attitude's and the Sun's geometry
+    r_true = r_whole if dt_used == dt_true else propagate_itrs_km(newer, t + dt_used)
+    b_itrs = igrf14_itrs_nt(t + dt_used, r_true)
     axis = dipole_axis_itrs(float(t[0]))
     mlat = magnetic_latitude_deg(r_true, axis)
     g2i = gcrs_to_itrs_matrices(t)
@@ -318,7 +333,8 @@ def make_world(
         )
         # The ring current's field at the Earth is along the dipole moment (southward) when
         # Dst < 0; 1.2: a fifth more from the currents it induces in the Earth.
-        b_itrs = b_itrs + (-1.2 * dst)[:, None] * axis[None, :]
+        if on("external_field"):
+            b_itrs = b_itrs + (-1.2 * dst)[:, None] * axis[None, :]
         truth["dst_peak_nt"] = float(peak)
         truth["storm_onset_h"] = float(onset)
     if "field_aligned_currents" in effects or small_unmodelled:
@@ -333,13 +349,15 @@ def make_world(
         strength = amp * rng.uniform(0.5, 1.5, size=crossing.max() + 2)[crossing]
         sheet = 0.5 * (np.tanh((am - edge_lo) / 1.0) - np.tanh((am - edge_hi) / 1.5))
         east = np.column_stack([np.zeros(n), strength * sheet * np.sign(mlat), np.zeros(n)])
-        b_itrs = b_itrs + nec_to_itrs(east, r_true)
+        if on("field_aligned_currents") or ("field_aligned_currents" not in effects):
+            b_itrs = b_itrs + nec_to_itrs(east, r_true)
     if "crustal_field" in effects or small_unmodelled:
         scale = rng.uniform(1.0, 2.0) if "crustal_field" in effects else 1.0
         nmin = 16 if "crustal_field" in effects else 100
-        b_itrs = b_itrs + scale * crust_itrs_nt(r_true, nmin=nmin)
+        if on("crustal_field") or ("crustal_field" not in effects):
+            b_itrs = b_itrs + scale * crust_itrs_nt(r_true, nmin=nmin)
     # Attitude and the body frame.
-    r_gcrs = np.einsum("nji,nj->ni", g2i, r_true)
+    r_gcrs = np.einsum("nji,nj->ni", g2i, r_whole)
     if rng.random() < 0.5:
         attitude = "tumbling"
         body_to_gcrs = tumbling_body_to_frame(t, rng, float(rng.choice([0.3, 1.0, 2.0])))
@@ -354,9 +372,10 @@ def make_world(
         walk = np.cumsum(rng.normal(size=(n, 3)), axis=0)
         walk = 0.5 * amp * walk / np.abs(walk).max()
         rv = walk + np.outer(flex, rng.normal(size=3) / np.sqrt(3))
-        truth_att = body_to_gcrs * Rotation.from_rotvec(rv)
+        if on("attitude_error"):
+            truth_att = body_to_gcrs * Rotation.from_rotvec(rv)
         truth["attitude_error_deg"] = float(np.degrees(amp))
-    if dt_true != 0.0:
+    if dt_used != 0.0:
         # A time-tag error of the magnetometer: the whole sample belongs to t + dt -- the
         # position (above), the Earth's rotation and the body's attitude.
         from scipy.spatial.transform import Slerp
@@ -379,7 +398,8 @@ def make_world(
             temp[k] = temp[k - 1] + (drive - temp[k - 1]) * (1 - np.exp(-cadence_s / tc))
         coef = rng.uniform(0.8, 3.0, size=3) * rng.choice([-1, 1], size=3)
         dtemp = temp - temp.mean()
-        raw = raw + np.outer(dtemp, coef) + 0.01 * np.outer(dtemp**2, coef)
+        if on("temperature"):
+            raw = raw + np.outer(dtemp, coef) + 0.01 * np.outer(dtemp**2, coef)
         lag = np.r_[np.full(3, temp[0]), temp[:-3]]
         extra["temperature"] = np.round(lag + rng.normal(scale=0.05, size=n), 1)
         truth["temperature_coef_nt_per_c_max"] = float(np.abs(coef).max())
@@ -390,7 +410,8 @@ def make_world(
         duty = ((t - t[0]) % 20.0) < 10.0
         cmd = cmd * duty[:, None] * (rng.random(n) > 0.1)[:, None]
         coupling = rng.normal(scale=rng.uniform(3.0, 10.0), size=(3, 3))
-        raw = raw + cmd @ coupling.T
+        if on("magnetorquer"):
+            raw = raw + cmd @ coupling.T
         for k, a in enumerate("xyz"):
             extra[f"mtq_{a}"] = np.round(cmd[:, k], 3)
     sigma = sensor.noise_nt
@@ -416,6 +437,7 @@ def make_world(
         truth=truth,
         noise=noise,
         sensor=sensor,
+        tle_truth=newer,
     )
     w.truth["attitude"] = attitude  # type: ignore[assignment]
     return w
