@@ -53,24 +53,29 @@ def calibration_holdout_rms_nt(b_raw_nt: np.ndarray, b_ref_nt: np.ndarray) -> fl
     return float(np.sqrt(np.mean(r**2)))
 
 
-def observability(seed: list[int], effects: list[str], **world_kw: object) -> dict[str, dict]:
+def observability(
+    seed: list[int], effects: list[str], noise: str = "white", small_unmodelled: bool = False
+) -> dict[str, dict]:
     """For each of ``effects``: the held-out RMS of the world with only it, of the world with
-    none, and whether it is observable. ``seed`` and ``world_kw`` as the world was made with."""
+    none, and whether it is observable. ``seed``, ``noise`` and ``small_unmodelled`` as the
+    world was made with."""
     every = frozenset(effects)
-    none = make_world(np.random.default_rng(seed), effects, exclude=every, **world_kw)  # type: ignore[arg-type]
-    assert none.tle_truth is not None
-    floor = calibration_holdout_rms_nt(none.b_raw_nt, reference_body_nt(none, none.tle_truth))
+
+    def world(exclude: frozenset[str]) -> tuple[World, TleSet]:
+        rng = np.random.default_rng(seed)
+        w = make_world(
+            rng, effects, noise=noise, small_unmodelled=small_unmodelled, exclude=exclude
+        )
+        assert w.tle_truth is not None
+        return w, w.tle_truth
+
+    none, truth = world(every)
+    floor = calibration_holdout_rms_nt(none.b_raw_nt, reference_body_nt(none, truth))
     out: dict[str, dict] = {}
     for name in effects:
-        alone = make_world(
-            np.random.default_rng(seed),
-            effects,
-            exclude=every - {name},
-            **world_kw,  # type: ignore[arg-type]
-        )
-        assert alone.tle_truth is not None
+        alone, truth = world(every - {name})
         # the orbit error is the user's element set; without it they would hold the truth's
-        tle = alone.tle_given if name == "orbit_error" else alone.tle_truth
+        tle = alone.tle_given if name == "orbit_error" else truth
         rms = calibration_holdout_rms_nt(alone.b_raw_nt, reference_body_nt(alone, tle))
         out[name] = {
             "holdout_rms_alone_nt": round(rms, 4),

@@ -74,6 +74,9 @@ def summarise(rows: list[dict]) -> dict:
     null = [r for r in rows if not r["injected"] and "error" not in r]
     n_inj = sum(len(r["injected"]) for r in comp)
     covered = [c["covered"] for r in comp for c in r["coverage"].values()]
+    # the project's own benchmark counts only observable effects (oracle.py)
+    scored = all("oracle" in r for r in comp)
+    observable = [(e, r) for r in comp for e, o in r.get("oracle", {}).items() if o["observable"]]
     by_kind = {}
     for kind in NOISE_KINDS:
         rs = [r for r in null if r["noise"] == kind]
@@ -86,19 +89,10 @@ def summarise(rows: list[dict]) -> dict:
     return {
         "compound_worlds": len(comp),
         "recall": sum(len(r["found"]) for r in comp) / max(n_inj, 1),
-        # the project's own benchmark counts only observable effects (oracle.py)
-        "observable_effects": (
-            sum(sum(o["observable"] for o in r["oracle"].values()) for r in comp)
-            if all("oracle" in r for r in comp)
-            else None
-        ),
+        "observable_effects": len(observable) if scored else None,
         "recall_observable": (
-            sum(
-                sum(e in r["found"] for e, o in r["oracle"].items() if o["observable"])
-                for r in comp
-            )
-            / max(sum(sum(o["observable"] for o in r["oracle"].values()) for r in comp), 1)
-            if all("oracle" in r for r in comp)
+            sum(e in r["found"] for e, r in observable) / max(len(observable), 1)
+            if scored
             else None
         ),
         "recall_with_twins": (
@@ -147,7 +141,7 @@ def main() -> None:
                 continue
             rng = np.random.default_rng([args.seed, i])
             world = make_world(rng, effects, noise=noise, small_unmodelled=small)
-            oracle = observability([args.seed, i], effects, noise=noise, small_unmodelled=small)
+            oracle = observability([args.seed, i], effects, noise, small)
             stem = f"world_{i}" if args.keep else "world"
             table, tle = where / f"{stem}.csv", where / f"{stem}.tle"
             world.write(table, tle)

@@ -388,10 +388,12 @@ class Review:
         (:func:`_stand_in`).
     blockless : list of str
         Effects named by their own test whose fitted model the final fit leaves out.
-    quiet_only : dict of str to (float, float, float, float)
+    quiet_only : list of str
         The effects of ``blockless`` judged on the quiet samples of a regional effect, named
-        there but left out of the final model (:func:`_quiet_only`): the held-out RMS on those
-        samples with them and with the calibration alone, then on every held-out sample [nT].
+        there but left out of the final model (:func:`_quiet_only`).
+    quiet_rms_nt : (float, float, float, float) or None
+        For ``quiet_only``: the held-out vector RMS on those samples with them and with the
+        calibration alone, then on every held-out sample [nT].
     gap_unexplained : bool
         The final held-out residual is above :data:`GAP_TIMES_NOISE` times the noise floor.
     verdict : str
@@ -413,7 +415,8 @@ class Review:
     weak: list[str] = field(default_factory=list)
     wander: dict[str, tuple[float, float]] = field(default_factory=dict)
     blockless: list[str] = field(default_factory=list)
-    quiet_only: dict[str, tuple[float, float, float, float]] = field(default_factory=dict)
+    quiet_only: list[str] = field(default_factory=list)
+    quiet_rms_nt: tuple[float, float, float, float] | None = None
     gap_unexplained: bool = False
     verdict: str = "none"
 
@@ -514,7 +517,8 @@ def review(data: DiagnosisData, att: Attribution) -> Review:
     # strength from crossing to crossing, and a model fitted on the training crossings predicted
     # the held-out ones worse than none).
     blockless: list[str] = []
-    quiet_only: dict[str, tuple[float, float, float, float]] = {}
+    quiet_only: list[str] = []
+    quiet_rms_nt: tuple[float, float, float, float] | None = None
     while final.rms_nt > att.baseline_rms_nt and fit_names:
         movable = [n for n in keep if n not in blockless]
         if not movable:
@@ -522,8 +526,8 @@ def review(data: DiagnosisData, att: Attribution) -> Review:
         fell_back = True
         if movable[-1] in OWN_TEST and movable[-1] in fit_names:
             blockless.append(movable[-1])
-        elif quiet := _quiet_only(data, att, final, blockless):
-            quiet_only = {n: quiet for n in movable}
+        elif quiet_rms_nt := _quiet_only(data, att, final, blockless):
+            quiet_only = list(movable)
             blockless += movable
             final = _refit(data, att, fit_names, keep, blockless)
             break
@@ -556,6 +560,7 @@ def review(data: DiagnosisData, att: Attribution) -> Review:
         wander=wander,
         blockless=blockless,
         quiet_only=quiet_only,
+        quiet_rms_nt=quiet_rms_nt,
         gap_unexplained=unexplained,
         verdict=_verdict(keep),
     )

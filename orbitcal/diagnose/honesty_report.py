@@ -204,8 +204,8 @@ def _mark_withdrawn(report: dict[str, Any], att: Attribution, rv: Review) -> Non
     )
     for name in rv.blockless:
         by_name[name]["model_left_out_reason"] = (
-            _quiet_only_words(rv.quiet_only[name])
-            if name in rv.quiet_only
+            _quiet_only_words(rv.quiet_rms_nt)
+            if name in rv.quiet_only and rv.quiet_rms_nt is not None
             else (
                 "named by its own regional test, but its fitted model predicted the held-out "
                 "blocks worse than none: the final model leaves it out"
@@ -327,9 +327,10 @@ def _fall_back_words(rv: Review) -> str:
         )
     if rv.quiet_only:
         one = len(rv.quiet_only) == 1
+        whose = "its" if one else "each one's"
         parts.append(
             f"{', '.join(rv.quiet_only)} left out of the final model but still named on the "
-            f"quiet latitudes where {'it was' if one else 'they were'} judged (see "
-            f"{'its' if one else 'each one' + chr(39) + 's'} model_left_out_reason)"
+            f"quiet latitudes where {'it was' if one else 'they were'} judged (see {whose} "
+            "model_left_out_reason)"
         )
     return out + "; ".join(parts)
