@@ -16,6 +16,7 @@ from orbitcal.diagnose.effects import DesignBlock, DiagnosisData, get_effect
 from orbitcal.diagnose.gap import _lies
 from orbitcal.diagnose.honesty import (
     GAP_TIMES_NOISE,
+    _beyond_residue,
     noise_floor_nt,
     residue_test,
     review,
@@ -112,6 +113,27 @@ def test_a_third_effect_with_a_field_of_its_own_is_kept() -> None:
     res = residue_test(data, fit, 2, train, holdout, name="square")
     assert not res.residue, res
     assert res.gain > 0.3
+
+
+@pytest.mark.parametrize(
+    ("p", "gain", "beyond"),
+    [
+        (0.005, 0.05, True),  # significant at the residue level
+        (0.005, 0.02, False),  # ... but too small a gain
+        (0.015, 0.334, True),  # independent world 11400 no. 7: a real attitude error
+        (0.019, 0.283, True),  # 10500 no. 8: a real attitude error
+        (0.019, 0.165, False),  # 10800 no. 5: a Sun-driven stand-in, the largest seen
+        (0.019, 0.112, False),  # 10800 no. 19: a Sun-driven stand-in
+        (0.06, 0.5, False),  # a material share, not significant at the selection's level
+        (float("nan"), 0.9, False),
+    ],
+)
+def test_a_material_share_significant_at_the_selections_level_is_not_a_residue(
+    p: float, gain: float, beyond: bool
+) -> None:
+    """A random walk no model forecasts leaves a real effect's chunk gains uneven; a share the
+    imperfect model of the others cannot take is then still named."""
+    assert _beyond_residue(p, gain) is beyond
 
 
 def test_a_final_model_worse_than_the_calibration_alone_falls_back() -> None:
