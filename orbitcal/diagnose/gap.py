@@ -106,6 +106,8 @@ def refusal(e: dict[str, Any]) -> str:
         return f"not the Sun's on this span: {e.get('unlit_reason')}"
     if e.get("status") == "possible residue":
         return str(e.get("residue_reason"))
+    if e.get("second_look_reason"):
+        return str(e.get("second_look_reason"))
     absorbed = e.get("absorbed_by_calibration_fraction")
     if absorbed is not None and absorbed >= 0.9:
         return (

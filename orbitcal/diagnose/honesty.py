@@ -68,7 +68,7 @@ against the same held-out data, and says so where a claim does not hold:
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -419,6 +419,12 @@ class Review:
         The final held-out residual is above :data:`GAP_TIMES_NOISE` times the noise floor.
     verdict : str
         The first effect of ``keep``, or ``"none"``.
+    second_look : list of str
+        When this review is of a second selection (:func:`second_look_exclusions`): the
+        effects that selection excluded.
+    second_look_twins : dict of str to str
+        The excluded effects that were not withdrawn themselves, each with the withdrawn effect
+        it is indistinguishable from.
     """
 
     keep: list[str]
@@ -440,6 +446,8 @@ class Review:
     quiet_rms_nt: tuple[float, float, float, float] | None = None
     gap_unexplained: bool = False
     verdict: str = "none"
+    second_look: list[str] = field(default_factory=list)
+    second_look_twins: dict[str, str] = field(default_factory=dict)
 
 
 def review(data: DiagnosisData, att: Attribution) -> Review:
@@ -903,6 +911,53 @@ def gap_times_noise(final: _Final, holdout: BoolArray) -> float:
 def _verdict(keep: Sequence[str]) -> str:
     """The first effect that stands, as the attribution ranked them, or ``"none"``."""
     return keep[0] if keep else "none"
+
+
+def second_look_exclusions(att: Attribution, rv: Review) -> tuple[list[str], dict[str, str]]:
+    """The selected effects a review withdrew because their held-out gain is not trusted (a
+    possible residue, immaterial, not significant on correlated chunks, within the noise's
+    wander), when the model it keeps leaves a gap: the selection may have passed over a
+    candidate in their favour. With them, the candidates the attribution found
+    indistinguishable from them (a time offset's along-track orbit error under nadir pointing
+    draws the same field, and would take the same gain). Returns the names to exclude (none
+    otherwise) and, for each twin among them, the withdrawn effect it is the twin of."""
+    if not rv.gap_unexplained:
+        return [], {}
+    names = [
+        *(r["effect"] for r in rv.residues if r["possible_residue"]),
+        *rv.immaterial,
+        *rv.correlated,
+        *rv.wander,
+    ]
+    names = [n for n in dict.fromkeys(names) if n not in OWN_TEST and n not in rv.keep]
+    twin_of: dict[str, str] = {}
+    for e in att.effects:
+        if e.name in names:
+            for t in (e.params or {}).get("indistinguishable_from") or []:
+                if t not in names and t not in OWN_TEST and t not in rv.keep:
+                    twin_of.setdefault(t, e.name)
+    return [*names, *twin_of], twin_of
+
+
+def with_earlier(
+    rv: Review, earlier: Review, excluded: Sequence[str], twin_of: Mapping[str, str]
+) -> Review:
+    """``rv`` (the review of a selection run without ``excluded``) with what ``earlier`` said of
+    the excluded effects: their residue tests, and their place in the immaterial, correlated
+    and wander lists; ``second_look`` names the excluded effects and ``twin_of`` the twins among
+    them."""
+    import dataclasses
+
+    gone = set(excluded)
+    return dataclasses.replace(
+        rv,
+        second_look=list(excluded),
+        second_look_twins=dict(twin_of),
+        residues=[*(r for r in earlier.residues if r["effect"] in gone), *rv.residues],
+        immaterial=[*(n for n in earlier.immaterial if n in gone), *rv.immaterial],
+        correlated=[*(n for n in earlier.correlated if n in gone), *rv.correlated],
+        wander={**{n: v for n, v in earlier.wander.items() if n in gone}, **rv.wander},
+    )
 
 
 def reviewed(data: DiagnosisData, att: Attribution, rv: Review | None = None) -> Attribution:

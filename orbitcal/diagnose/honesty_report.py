@@ -122,6 +122,10 @@ def review_report(
     return report
 
 
+#: The status of an effect the second selection left out as a withdrawn effect's twin.
+SECOND_LOOK_TWIN = "twin of a withdrawn effect"
+
+
 def _withdraw(
     by_name: dict[str, dict[str, Any]],
     names: Sequence[str],
@@ -152,6 +156,15 @@ def _mark_withdrawn(report: dict[str, Any], att: Attribution, rv: Review) -> Non
             "axis, a drift of it and a shift in time (their imperfect models), its field "
             f"shrinks the held-out residual by {r['gain']:.1%} (p = {r['p_value']:.2g}): "
             "what it takes may be what the others' templates miss",
+        )
+    for name, partner in rv.second_look_twins.items():
+        _withdraw(
+            by_name,
+            [name],
+            SECOND_LOOK_TWIN,
+            "second_look_reason",
+            f"indistinguishable on these data from {partner}, which the review withdrew: it "
+            "would take the same gain, so the second selection left it out too",
         )
     _withdraw(by_name, rv.inseparable, "inseparable")
     _withdraw(by_name, rv.unlit, "unlit", "unlit_reason", UNLIT_REASON)
@@ -295,8 +308,22 @@ def _honesty_section(rv: Review) -> dict[str, Any]:
         "fell_back": rv.fell_back,
         "withdrawn": rv.withdrawn,
         "named_without_model": list(rv.blockless),
+        "second_look": list(rv.second_look),
         "statement": _fall_back_words(rv),
+        **({"second_look_statement": _second_look_words(rv)} if rv.second_look else {}),
     }
+
+
+def _second_look_words(rv: Review) -> str:
+    """What the second selection did (:func:`orbitcal.diagnose.honesty.second_look_exclusions`)."""
+    withdrawn = [n for n in rv.second_look if n not in rv.second_look_twins]
+    twins = list(rv.second_look_twins)
+    without = ", ".join(withdrawn) + (f" (and its twin {', '.join(twins)})" if twins else "")
+    return (
+        f"the review withdrew {', '.join(withdrawn)} from the first selection and left a gap: the "
+        f"selection ran again without {without}, and its result, reviewed in turn, stands: "
+        f"{', '.join(rv.keep) or 'none'}"
+    )
 
 
 def _quiet_only_words(rms: tuple[float, float, float, float]) -> str:

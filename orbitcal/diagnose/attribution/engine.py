@@ -256,6 +256,7 @@ def _selection(
     split: _Split,
     candidates: Sequence[Effect],
     options: AttributionOptions,
+    excluded: Sequence[str] = (),
 ) -> tuple[GroupSelection, Stepwise, list[Candidate], dict[str, list[str]]]:
     """Run the stepwise selection: the selection, its state, the chosen candidates and the
     candidates indistinguishable from each (near twins included)."""
@@ -284,7 +285,10 @@ def _selection(
     # ``max_steps`` places: named by that test after the selection, not beside a third effect
     # that would take up what the others leave on its quiet samples.
     steps = options.max_steps - 1 if split.regional is not None else options.max_steps
-    stepwise = Stepwise(sel, single, base.rms_nt, base.residual_nt, steps, {})
+    # An excluded candidate is never chosen: as one the backward step dropped.
+    stepwise = Stepwise(
+        sel, single, base.rms_nt, base.residual_nt, steps, {}, dropped=list(excluded)
+    )
     chosen, indistinguishable, _ = stepwise.run()
     for name, partner in sel.near_twins(chosen).items():
         if partner not in indistinguishable.get(name, []):
@@ -353,6 +357,7 @@ def attribute(
     options: AttributionOptions = AttributionOptions(),
     candidates: Sequence[Effect] = CATALOGUE,
     fit_mask: BoolArray | None = None,
+    excluded: Sequence[str] = (),
 ) -> Attribution:
     """Attribute the calibration residual to catalogue effects, judged on held-out later blocks.
 
@@ -375,6 +380,9 @@ def attribute(
     fit_mask : ndarray of bool, optional
         Further restricts the samples every fit may use (e.g. quiet magnetic latitudes during a
         storm); held-out scoring still uses every held-out sample.
+    excluded : sequence of str
+        Candidates scored alone but never selected (the review withdrew them from an earlier
+        selection on these data: :func:`orbitcal.diagnose.api.diagnose_data`'s second look).
 
     Raises
     ------
@@ -383,7 +391,9 @@ def attribute(
     """
     split = _split_for(data, candidates, options, fit_mask)
     base = split.base
-    sel, stepwise, chosen, indistinguishable = _selection(data, split, candidates, options)
+    sel, stepwise, chosen, indistinguishable = _selection(
+        data, split, candidates, options, excluded
+    )
     implausible = stepwise.implausible
     selected = [c.name for c in chosen]
     chosen_blocks = [c.block for c in chosen]
@@ -408,7 +418,7 @@ def attribute(
     if not selected and flat:
         # Nothing moves the held-out residual: look for an effect the calibration absorbed whole.
         absorbed = _absorbed_by_calibration(data, sel.designs, base.rms_nt, robust=options.robust)
-        if absorbed is not None:
+        if absorbed is not None and absorbed.name not in excluded:
             selected.append(absorbed.name)
             step_scores.append(absorbed)
             effects = [absorbed] + [e for e in effects if e.name != absorbed.name]
@@ -441,7 +451,7 @@ def attribute(
         implausible=implausible,
         has_prior=data.calibration_prior is not None,
         span_s=float(data.t_utc_s[-1] - data.t_utc_s[0]),
-        dropped=stepwise.dropped,
+        dropped=[n for n in stepwise.dropped if n not in excluded],
         fit_mask=None if fit_mask is None else np.asarray(fit_mask, dtype=bool),
         final_block_names=final_names,
     )
