@@ -142,3 +142,42 @@ def test_without_a_withdrawal_there_is_no_second_look() -> None:
     plain = attribute(data)
     assert att.selected == plain.selected
     assert rv.keep == review(data, plain).keep
+
+
+@pytest.mark.parametrize(
+    ("second_keep", "taken"),
+    [
+        (["attitude_error"], True),  # a candidate the selection passed over: the second look
+        (["field_aligned_currents"], False),  # named by its own regional test: not one
+        (["attitude_error", "field_aligned_currents"], False),
+        ([], False),  # nothing new
+    ],
+)
+def test_the_second_selection_is_kept_only_for_a_passed_over_candidate(
+    monkeypatch: pytest.MonkeyPatch, second_keep: list[str], taken: bool
+) -> None:
+    """The decision of :func:`_attribute_reviewed`, with the attribution and review replaced by
+    what each round returns (11700 no. 4 of the independent worlds named auroral currents of
+    nothing injected when any new effect was taken)."""
+    import orbitcal.diagnose.attribution as attribution
+    import orbitcal.diagnose.honesty as honesty
+
+    first_att = _Att([_Score("time_offset", [])])
+    second_att = _Att([])
+    calls: list[tuple[str, ...]] = []
+
+    def fake_attribute(data: object, **kw: Any) -> _Att:
+        calls.append(tuple(kw.get("excluded", ())))
+        return first_att if len(calls) == 1 else second_att
+
+    def fake_review(data: object, att: _Att) -> Review:
+        if att is first_att:
+            return _review(correlated=["time_offset"], gap_unexplained=True)
+        return _review(keep=list(second_keep), gap_unexplained=False)
+
+    monkeypatch.setattr(attribution, "attribute", fake_attribute)
+    monkeypatch.setattr(honesty, "review", fake_review)
+    att, rv = _attribute_reviewed(None, DiagnosisOptions(), None)  # type: ignore[arg-type]
+    assert calls == [(), ("time_offset",)]
+    assert (att is second_att) is taken
+    assert rv.second_look == (["time_offset"] if taken else [])

@@ -212,11 +212,17 @@ def _attribute_reviewed(
     passed alone at p = 0.0015 and 0.0003 lost the first step to a Sun-driven field and a time
     offset the review then withdrew, and the report said "none" or named the currents alone with
     a gap of 6.8 x the noise). The selection is then run again without the withdrawn effects; its
-    result, reviewed in turn, replaces the first when it keeps an effect the first did not. The
+    result, reviewed in turn, replaces the first when it keeps an effect the first did not (one
+    the stepwise selection chose, not one named by its own regional test). The
     withdrawn effects keep their status and reason in the report.
     """
     from orbitcal.diagnose.attribution import attribute
-    from orbitcal.diagnose.honesty import review, second_look_exclusions, with_earlier
+    from orbitcal.diagnose.honesty import (
+        OWN_TEST,
+        review,
+        second_look_exclusions,
+        with_earlier,
+    )
 
     att = attribute(data, options=options.attribution, fit_mask=fit_mask)
     rv = review(data, att)
@@ -225,7 +231,11 @@ def _attribute_reviewed(
         return att, rv
     again = attribute(data, options=options.attribution, fit_mask=fit_mask, excluded=excluded)
     rv_again = review(data, again)
-    if not set(rv_again.keep) - set(rv.keep):
+    new = set(rv_again.keep) - set(rv.keep)
+    # The second look is for a candidate the stepwise selection passed over: an effect named by
+    # its own regional test on what the second selection leaves is no such candidate
+    # (independent world 11700 no. 4: auroral currents of nothing injected, named beside none).
+    if not new or new & OWN_TEST:
         return att, rv
     return again, with_earlier(rv_again, rv, excluded, twin_of)
 
