@@ -382,7 +382,7 @@ def attribute(
         storm); held-out scoring still uses every held-out sample.
     excluded : sequence of str
         Candidates scored alone but never selected (the review withdrew them from an earlier
-        selection on these data: :func:`orbitcal.diagnose.api.diagnose_data`'s second look).
+        selection on these data: the second look of ``orbitcal.diagnose.api._attribute_reviewed``).
 
     Raises
     ------
