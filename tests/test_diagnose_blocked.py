@@ -157,3 +157,58 @@ def test_pair_screen_from_gram_matrices_equals_one_weighted_fit_per_pair(
     screened = sel.screen_pairs(fixed, pairs)
     each = [sel.screen_rms(fixed, [a, b]) for a, b in pairs]
     np.testing.assert_allclose(screened, each, rtol=1e-9)
+
+
+def test_estimation_samples_are_all_up_to_the_cap_then_every_kth(monkeypatch) -> None:
+    monkeypatch.setattr(blocked, "FIT_MAX_SAMPLES", 100)
+    mask = np.zeros(1000, dtype=bool)
+    mask[:100] = True
+    np.testing.assert_array_equal(blocked.estimation_samples(mask), np.arange(100))
+    mask[100:250] = True  # 250 samples: every 3rd (ceil(250 / 100))
+    mask[600:601] = True  # a sample apart counts as any other
+    index = blocked.estimation_samples(mask)
+    np.testing.assert_array_equal(index, np.flatnonzero(mask)[::3])
+    assert index.size <= 100
+    assert blocked.estimation_samples(np.ones(1001, dtype=bool)).size == 91  # every 11th
+
+
+def test_a_fit_on_every_kth_sample_agrees_with_the_full_fit_within_its_errors(
+    world, monkeypatch
+) -> None:
+    """Above the cap a fit estimates on every k-th sample: its parameters are those of the fit on
+    all of them within a few of their standard errors, its sum of squares stands for all the
+    samples, and its residual (predicted at every sample) is as small to a hundredth."""
+    data, train, blocks = world
+    full = fit_joint(data, train, blocks)
+    monkeypatch.setattr(blocked, "FIT_MAX_SAMPLES", int(train.sum()) // 3)
+    thin = fit_joint(data, train, blocks)
+    assert blocked.estimation_samples(train).size < 0.3 * train.sum()
+    sd = np.sqrt(np.diag(thin.cov_cal))
+    theta_full = np.r_[full.a.ravel(), full.o_nt]
+    theta_thin = np.r_[thin.a.ravel(), thin.o_nt]
+    assert np.all(np.abs(theta_thin - theta_full) < 4.0 * sd)
+    for cf, ct, cov in zip(full.coef, thin.coef, thin.coef_cov, strict=True):
+        assert np.all(np.abs(ct - cf) < 4.0 * np.sqrt(np.diag(cov)) + 1e-9 * np.abs(cf))
+    assert thin.train_rss_nt2 == pytest.approx(full.train_rss_nt2, rel=0.1)
+    r_full = data.b_raw_nt - full.predict_nt(data)
+    r_thin = data.b_raw_nt - thin.predict_nt(data)
+    assert np.sqrt(np.mean(r_thin**2)) == pytest.approx(np.sqrt(np.mean(r_full**2)), rel=0.01)
+
+
+def test_rows_held_between_reweighting_steps_change_nothing(world, monkeypatch) -> None:
+    """A fit's rows built once and held for its reweighting steps give the very same fit as rows
+    built again at every step (bit for bit)."""
+    data, train, blocks = world
+    held = fit_joint(data, train, blocks)
+    design = BlockedDesign(data, blocks)
+    index = np.flatnonzero(train)
+    y = data.b_raw_nt[index].reshape(-1)
+    design.normal_equations(index, y, np.ones_like(y))
+    assert design._held is not None and design._held[0] is index  # held for the next step
+    monkeypatch.setattr(blocked, "HELD_ROWS_BYTES", 0)
+    again = fit_joint(data, train, blocks)
+    np.testing.assert_array_equal(held.a, again.a)
+    np.testing.assert_array_equal(held.o_nt, again.o_nt)
+    for a, b in zip(held.coef, again.coef, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert held.sigma_nt == again.sigma_nt and held.train_rss_nt2 == again.train_rss_nt2

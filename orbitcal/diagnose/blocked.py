@@ -21,17 +21,44 @@ import numpy as np
 import numpy.typing as npt
 
 from orbitcal.arrays import FloatArray
-from orbitcal.diagnose.calibration_columns import calibration_r_inv, calibration_rows
+from orbitcal.diagnose.calibration_columns import (
+    calibration_r_inv,
+    calibration_r_inv_of,
+    calibration_rows,
+)
 from orbitcal.diagnose.data import FIELD_SCALE_NT, DiagnosisData
 from orbitcal.diagnose.design import DesignBlock
 
-__all__ = ["FIT_BLOCK_SAMPLES", "BlockedDesign"]
+__all__ = ["FIT_BLOCK_SAMPLES", "FIT_MAX_SAMPLES", "BlockedDesign", "estimation_samples"]
 
 IntArray = npt.NDArray[np.intp]
 
 #: Samples per block: the rows of one block, ``3 x FIT_BLOCK_SAMPLES x p x 8`` bytes (1.5 MB at
 #: p = 24), stay in the cache while their products are formed.
 FIT_BLOCK_SAMPLES = 2048
+
+#: Samples a fit estimates its parameters on at most. Beyond, it uses every k-th of the samples it
+#: may see (k = ceil(n / FIT_MAX_SAMPLES)); the residuals, scores and tests that follow read every
+#: sample. At 1 Hz a day's 60,480 training samples hold no more about 12 + 20 parameters than
+#: every 4th of them (the misfit is correlated over minutes, the noise averages down as 1 / sqrt
+#: of 15,000 samples to a hundredth of a nT), and each reweighted fit's passes over them were two
+#: thirds of the diagnosis's time on such a day (``benchmarks/diagnose_timing.py``). Every
+#: benchmark world (10 s cadence, at most a day) stays below the cap: their fits are unchanged.
+FIT_MAX_SAMPLES = 20_000
+
+
+def estimation_samples(fit_mask: npt.NDArray[np.bool_]) -> IntArray:
+    """The samples a fit of ``fit_mask`` estimates its parameters on: all of them up to
+    :data:`FIT_MAX_SAMPLES`, else every k-th (k = ceil(n / FIT_MAX_SAMPLES))."""
+    index = np.flatnonzero(fit_mask)
+    step = -(-index.size // FIT_MAX_SAMPLES)
+    return index[::step] if step > 1 else index
+
+
+#: A fit's rows are built once and held for its reweighting steps when they take at most this
+#: many bytes (15,000 samples of a 40-column block take 14 MB); beyond, each step builds them
+#: again a block at a time.
+HELD_ROWS_BYTES = 64 * 2**20
 
 #: Runs of consecutive samples shorter than this on average are read by index, not by views.
 MIN_RUN_SAMPLES = 64
@@ -51,30 +78,49 @@ def _effect_scales(data: DiagnosisData, block: DesignBlock) -> FloatArray:
     whole (the radial gradient of a pure dipole is -3B/r) keeps a floor of 1e-6 of its plain
     root mean square, so that the normal equations stay invertible. A column's scale depends on
     that column only, so it is kept with the block (a frozen dataclass: stored beside its fields)
-    for every fit.
+    for every fit. Beyond :data:`FIT_MAX_SAMPLES` samples, the root mean squares are read on
+    every k-th sample (:func:`estimation_samples` of all), as the fits estimate on.
     """
     cache: dict[int, tuple[weakref.ref[DiagnosisData], FloatArray]]
     cache = block.__dict__.setdefault("_scale_cache", {})
     hit = cache.get(id(data))
     if hit is not None and hit[0]() is data:
         return hit[1]
-    n_rows = 3 * data.n
     q = block.width
     # One pass: the part a column keeps outside the calibration's span has the square norm
     # |e|^2 - |Q^T e|^2 (Q orthonormal), with Q^T e = R^-T X^T e.
     sum_sq = np.zeros(q)
     x_t_eff = np.zeros((12, q))
-    for a in range(0, data.n, FIT_BLOCK_SAMPLES):
-        part = slice(a, a + FIT_BLOCK_SAMPLES)
+    index = estimation_samples(np.ones(data.n, dtype=bool))
+    parts: Iterator[IntArray | slice]
+    if index.size == data.n:
+        parts = (slice(a, a + FIT_BLOCK_SAMPLES) for a in range(0, data.n, FIT_BLOCK_SAMPLES))
+        r_inv = calibration_r_inv(data)
+    else:  # a scale is a root mean square: the samples a fit estimates on tell it as well
+        parts = (index[a : a + FIT_BLOCK_SAMPLES] for a in range(0, index.size, FIT_BLOCK_SAMPLES))
+        r_inv = _thinned_r_inv(data, index)
+    for part in parts:
         eff = block.rows(part).reshape(-1, q)
         sum_sq += np.sum(eff**2, axis=0)
         x_t_eff += calibration_rows(data, part).T @ eff
-    q_eff = calibration_r_inv(data).T @ x_t_eff
+    q_eff = r_inv.T @ x_t_eff
+    n_rows = 3 * index.size
     rest_sq = np.clip(sum_sq - np.sum(q_eff**2, axis=0), 0.0, None)
     raw = np.sqrt(sum_sq / n_rows)
     scale = np.maximum(np.sqrt(rest_sq / n_rows), 1e-6 * raw)
     cache[id(data)] = (weakref.ref(data), scale)
     return scale
+
+
+#: ``R^-1`` of the calibration columns on the thinned samples of the column scales, per data set.
+_R_INV_THINNED: weakref.WeakKeyDictionary[DiagnosisData, FloatArray] = weakref.WeakKeyDictionary()
+
+
+def _thinned_r_inv(data: DiagnosisData, index: IntArray) -> FloatArray:
+    hit = _R_INV_THINNED.get(data)
+    if hit is None:
+        hit = _R_INV_THINNED[data] = calibration_r_inv_of(data, index)
+    return hit
 
 
 class BlockedDesign:
@@ -109,6 +155,7 @@ class BlockedDesign:
         self.block_samples = int(FIT_BLOCK_SAMPLES if block_samples is None else block_samples)
         self.scale = self._column_scales()
         self._axis_index = self._axis_columns()
+        self._held: tuple[IntArray, list[tuple[slice, list[FloatArray]]]] | None = None
 
     # -- rows --------------------------------------------------------------------------------
 
@@ -205,6 +252,22 @@ class BlockedDesign:
             return [c, c, c]
         return [np.concatenate([c, *(rows[i] for rows in per_block)], axis=1) for i in range(3)]
 
+    def _axis_blocks(self, index: IntArray) -> Iterator[tuple[slice, list[FloatArray]]]:
+        """:meth:`_axis_design` of each block of :meth:`chunks` with the slice of its rows; held
+        for the next call with the same ``index`` (a fit's reweighting steps) when they take at
+        most :data:`HELD_ROWS_BYTES`."""
+        if self._held is not None and self._held[0] is index:
+            yield from self._held[1]
+            return
+        width = sum(ix.size for ix in self._axis_index)
+        if 8 * index.size * width > HELD_ROWS_BYTES:
+            for part, rows in self.chunks(index):
+                yield rows, self._axis_design(part)
+            return
+        held = [(rows, self._axis_design(part)) for part, rows in self.chunks(index)]
+        self._held = (index, held)
+        yield from held
+
     def normal_equations(
         self, index: IntArray, y: FloatArray, w: FloatArray
     ) -> tuple[FloatArray, FloatArray]:
@@ -218,8 +281,7 @@ class BlockedDesign:
         axis_index = self._axis_index
         grams = [np.zeros((ix.size, ix.size)) for ix in axis_index]
         rhss = [np.zeros(ix.size) for ix in axis_index]
-        for part, rows in self.chunks(index):
-            a_axes = self._axis_design(part)
+        for rows, a_axes in self._axis_blocks(index):
             m = a_axes[0].shape[0]
             wv = w[rows].reshape(m, 3)
             yv = y[rows].reshape(m, 3)
@@ -240,8 +302,7 @@ class BlockedDesign:
         out = np.empty(3 * index.size)
         raw = theta / self.scale  # the parameters of the unscaled columns
         theta_axes = [raw[ix] for ix in self._axis_index]
-        for part, rows in self.chunks(index):
-            a_axes = self._axis_design(part)
+        for rows, a_axes in self._axis_blocks(index):
             pred = np.column_stack([a @ t for a, t in zip(a_axes, theta_axes, strict=True)])
             out[rows] = y[rows] - pred.reshape(-1)
         return out

@@ -8,13 +8,13 @@ held-out data; the training BIC that picks an effect's variant.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import numpy.typing as npt
 
 from orbitcal.arrays import BoolArray, FloatArray, IntArray
-from orbitcal.diagnose.blocked import BlockedDesign
+from orbitcal.diagnose.blocked import BlockedDesign, estimation_samples
 from orbitcal.diagnose.effects import (
     FIELD_SCALE_NT,
     DesignBlock,
@@ -68,7 +68,9 @@ class JointFit:
     bounded : bool
         Whether the effect parameters were kept inside their physical ranges.
     train_rss_nt2 : float
-        Sum of the squared (unweighted) residual over the fitted samples [nT^2].
+        Sum of the squared (unweighted) residual over the fitted samples [nT^2] (over the samples
+        the parameters were estimated on, times ``fit_mask``'s samples / theirs when
+        :func:`estimation_samples` thinned them).
     """
 
     a: FloatArray
@@ -124,7 +126,8 @@ def fit_joint(
     data : DiagnosisData
         All samples; ``blocks`` must be built on the same samples.
     fit_mask : ndarray of bool, shape (N,)
-        Samples the fit may see.
+        Samples the fit may see (beyond :data:`FIT_MAX_SAMPLES` of them, the parameters are
+        estimated on every k-th: :func:`estimation_samples`).
     blocks : sequence of DesignBlock
         Effect regressors.
     robust : bool
@@ -158,7 +161,8 @@ def fit_joint(
         are then within ~1e-4 standard errors of the converged ones.
     """
     design = BlockedDesign(data, blocks)
-    index = np.flatnonzero(fit_mask)
+    index = estimation_samples(fit_mask)
+    n_fit = int(np.count_nonzero(fit_mask))
     y = data.b_raw_nt[index].reshape(-1)
     w = np.ones_like(y) if weights is None else np.asarray(weights[index], dtype=float).reshape(-1)
     noise = _PlainNoise(design, index, y)
@@ -174,7 +178,10 @@ def fit_joint(
     theta, normal, sigma, r = _reweighted_solve(
         design, index, y, w, ridge, (prior_mean, prior_precision), (lo_s, hi_s), steps
     )
-    return _packed(blocks, design.scale, theta, normal, sigma, r, bounded=bounded)
+    fit = _packed(blocks, design.scale, theta, normal, sigma, r, bounded=bounded)
+    if index.size < n_fit:  # thinned: the sum of squares stands for all the samples
+        fit = replace(fit, train_rss_nt2=fit.train_rss_nt2 * n_fit / index.size)
+    return fit
 
 
 class _PlainNoise:
