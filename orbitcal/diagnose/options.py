@@ -17,6 +17,7 @@ from orbitcal.diagnose.prior import DEFAULT_SIGMA_MATRIX, DEFAULT_SIGMA_OFFSET_N
 
 __all__ = [
     "DEFAULT_CRUST_MODEL",
+    "DEFAULT_WORKERS",
     "HOLDOUT_BLOCKS",
     "N_BLOCKS",
     "AttributionOptions",
@@ -26,6 +27,12 @@ __all__ = [
 #: Equal-duration time blocks of a diagnosis, and how many of the latest are held out.
 N_BLOCKS = 10
 HOLDOUT_BLOCKS = 3
+
+#: Threads of a selection step (:attr:`AttributionOptions.workers`): the candidates' fits are
+#: independent. Much of a fit holds the interpreter (small products), so two threads gain a
+#: little: the torquer day at 1 Hz of ``benchmarks/diagnose_timing.py`` took 6.8 s of wall time
+#: against 7.3 s with one (8.2 s of CPU against 7.6), the same report to the bit.
+DEFAULT_WORKERS = 2
 
 #: Crustal model used as the crustal_field candidate (Olsen et al. 2017).
 DEFAULT_CRUST_MODEL = "LCS-1"
@@ -59,6 +66,10 @@ class AttributionOptions:
         Huber-reweighted fits.
     split_tests : bool
         Also run the split-fit tests (sunlit/eclipse, attitude regimes, time blocks).
+    workers : int
+        Threads that fit the candidates of a selection step side by side (at most the machine's
+        cores; 1: one after the other). Each candidate's fit is computed alone in its thread,
+        with one BLAS thread, so the result does not depend on it.
     """
 
     n_blocks: int = N_BLOCKS
@@ -71,6 +82,7 @@ class AttributionOptions:
     tie_tolerance: float = 0.01
     robust: bool = True
     split_tests: bool = True
+    workers: int = DEFAULT_WORKERS
 
 
 @dataclass(frozen=True)

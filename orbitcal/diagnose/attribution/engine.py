@@ -273,12 +273,13 @@ def _selection(
         alpha=options.alpha,
         min_gain=options.min_gain,
         tie_tolerance=options.tie_tolerance,
+        workers=options.workers,
     )
     base = split.base
     # Single-effect scores against the baseline (also the first forward step).
-    single = {
-        name: sel.candidate([], name, base.residual_nt, None, base.rms_nt) for name in designs
-    }
+    names = list(designs)
+    fitted = sel.map(lambda n: sel.candidate([], n, base.residual_nt, None, base.rms_nt), names)
+    single = dict(zip(names, fitted, strict=True))
     # Implausible against the baseline: reported with the single fits of the candidates not
     # selected. Within the selection a candidate is judged again at every step.
     # An effect found by its regional test in the calibration's residual takes one of the

@@ -6,9 +6,11 @@ and the backward step.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+import os
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -30,6 +32,9 @@ from orbitcal.diagnose.effects import (
     get_effect,
 )
 from orbitcal.metrics import norm_rms_nt
+
+_T = TypeVar("_T")
+_R = TypeVar("_R")
 
 
 @dataclass(frozen=True)
@@ -115,6 +120,7 @@ class Selection:
     alpha: float = 0.05
     min_gain: float = 0.03
     tie_tolerance: float = 0.01
+    workers: int = 1
     _beside: dict[tuple[Any, ...], tuple[list[DesignBlock], DesignBlock]] = field(
         default_factory=dict, repr=False
     )
@@ -123,6 +129,16 @@ class Selection:
     _screen_holdout: IntArray = field(
         default_factory=lambda: np.zeros(0, dtype=np.intp), repr=False
     )
+
+    def map(self, fn: Callable[[_T], _R], items: Sequence[_T]) -> list[_R]:
+        """``[fn(x) for x in items]``, on up to :attr:`workers` threads (at most the machine's
+        cores) when there are several items: the candidates of a step are fitted independently
+        (NumPy and BLAS release the interpreter while they work), in the order given back."""
+        workers = min(self.workers, len(items), os.cpu_count() or 1)
+        if workers <= 1:
+            return [fn(x) for x in items]
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            return list(pool.map(fn, items))
 
     def effect(self, name: str) -> Effect:
         """The catalogue entry of candidate ``name`` (this selection's, else the catalogue's)."""

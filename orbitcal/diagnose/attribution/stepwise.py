@@ -12,6 +12,7 @@ from orbitcal.diagnose.attribution.groups import GroupSelection
 from orbitcal.diagnose.attribution.joint_fit import JointFit
 from orbitcal.diagnose.attribution.selection import Candidate
 from orbitcal.diagnose.attribution.significance import _chunk_test
+from orbitcal.diagnose.design import DesignBlock
 from orbitcal.metrics import norm_rms_nt
 
 
@@ -130,14 +131,21 @@ class Stepwise:
             level = sel.alpha / len(remaining)
             passing: list[Candidate] = []
             tried: list[Candidate] = []
-            for name in remaining:
-                cand = (
-                    single[name]
-                    if not chosen
-                    else sel.candidate(blocks, name, current_r, current_fit, current_rms)
-                )
+
+            def judged(
+                name: str,
+                fixed: list[DesignBlock] = blocks,
+                fixed_fit: JointFit | None = current_fit,
+                r: FloatArray = current_r,
+                rms: float = current_rms,
+                level: float = level,
+            ) -> tuple[Candidate, str | None]:
+                cand = single[name] if not chosen else sel.candidate(fixed, name, r, fixed_fit, rms)
+                return cand, sel.implausible_reason(fixed, cand, level, rms, r)
+
+            # each candidate fitted and judged alone (side by side on sel.workers threads)
+            for name, (cand, reason) in zip(remaining, sel.map(judged, remaining), strict=True):
                 tried.append(cand)
-                reason = sel.implausible_reason(blocks, cand, level, current_rms, current_r)
                 if reason is not None:
                     implausible[name] = reason
                     continue
