@@ -133,3 +133,38 @@ def test_learned_model_is_the_crust_candidate_without_a_crust_model() -> None:
     print("learned crust candidate:", top["holdout_rms_before_nt"], top["holdout_rms_after_nt"])
     assert top["shrink"] > 1.8
     assert report["learned"]["candidate"] == f"crustal_field ({LEARNED_CRUST})"
+
+
+@pytest.mark.parametrize("gap", [False, True])
+def test_the_summary_of_the_final_residual_is_fitted_only_when_a_field_is_left(gap: bool) -> None:
+    """With a crustal model offered, the learned model summarises what the final model leaves. A
+    final residual at the white-noise floor (a torquer world, its effect modelled) has nothing
+    for it: the summary says so and why, and its fit is not made. A field left in the residual
+    (a crust unlike the model's, 17 nT held out against a floor of 2.2 nT) is fitted."""
+    import dataclasses
+
+    from test_diagnose_worlds import crust_b_itrs_nt, make_world
+
+    from orbitcal.diagnose.api import diagnose_data
+    from orbitcal.diagnose.gap import noise_ratio
+    from orbitcal.diagnose.learned import LEARNED_MIN_TIMES_NOISE
+
+    data = make_world("none" if gap else "magnetorquer", seed=4, attitude="tumbling").data
+    if gap:
+        crust = crust_b_itrs_nt(data.r_itrs_km, seed=5) * 4.0
+        extra = np.einsum("nij,nj->ni", data.rot_itrs_to_body, crust)
+        data = dataclasses.replace(data, b_raw_nt=data.b_raw_nt + extra)
+    diag = diagnose_data(data, rng=np.random.default_rng(0))
+    att = diag.attribution
+    times = noise_ratio(att.final_residual_nt, att.final_rms_nt, att.holdout)[2]
+    learned = diag.report.to_json()["learned"]  # type: ignore[index]
+    assert learned["legendre_order"] == 3 and learned["hidden_nodes"] == 6
+    assert learned["fitted_to"] == "the final model's residual on the training blocks"
+    if gap:
+        assert times > 3.0  # measured 7.97
+        assert learned["fitted"] is True and "holdout_rms_after_nt" in learned
+    else:
+        assert times <= LEARNED_MIN_TIMES_NOISE  # measured 0.95
+        assert learned["fitted"] is False and learned["stage_chosen"] == "none"
+        assert "white-noise floor" in learned["not_fitted_reason"]
+        assert "holdout_rms_after_nt" not in learned

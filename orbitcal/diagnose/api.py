@@ -181,12 +181,7 @@ def _run(
         where_analysis(data, att.final_residual_nt, holdout=att.holdout) if att.selected else None
     )
     if options.learned and learned_result is None:
-        from orbitcal.diagnose.learned import learned_field_error
-
-        learned_result = learned_field_error(
-            data, att.final_residual_nt, train=att.train, holdout=att.holdout, rng=rng
-        )
-        learned_result["fitted_to"] = "the final model's residual on the training blocks"
+        learned_result = _learned_summary(data, att, rng)
     document = build_report(data, att, where, learned=learned_result, where_final=where_final)
     # Issue 25: the report's claims checked on the held-out data (orbitcal.diagnose.honesty):
     # possible residues, a fall-back when the final model is worse than the baseline, the gap.
@@ -197,6 +192,36 @@ def _run(
     document["evidence"] = evidence(data, final_att)  # curves the HTML page draws (evidence.py)
     document = review_report(document, data, att, chosen=chosen, rv=rv)
     return Diagnosis(report=Report.from_json(document), attribution=final_att, data=data)
+
+
+def _learned_summary(
+    data: DiagnosisData, att: Attribution, rng: np.random.Generator
+) -> dict[str, Any]:
+    """The seed-003 model fitted to what the final model leaves on the training blocks, unless
+    that is already the white noise (held-out RMS per component within
+    :data:`~orbitcal.diagnose.learned.LEARNED_MIN_TIMES_NOISE` of the noise floor of
+    :func:`~orbitcal.diagnose.gap.noise_floor_nt`): then there is no field for it to learn, and
+    its fit (a quarter of a diagnosis's time on a day at 1 Hz) is not made."""
+    from orbitcal.diagnose.gap import noise_ratio
+    from orbitcal.diagnose.learned import (
+        LEARNED_MIN_TIMES_NOISE,
+        learned_field_error,
+        not_fitted_summary,
+    )
+
+    sigma, rms_pc, times = noise_ratio(att.final_residual_nt, att.final_rms_nt, att.holdout)
+    if np.isfinite(times) and times <= LEARNED_MIN_TIMES_NOISE:
+        summary = not_fitted_summary(
+            f"the final model's held-out residual ({rms_pc:.4g} nT per component) is at the "
+            f"white-noise floor ({sigma:.4g} nT, {times:.2f}x; at most "
+            f"{LEARNED_MIN_TIMES_NOISE:g}x): no field is left for a learned model to find"
+        )
+    else:
+        summary = learned_field_error(
+            data, att.final_residual_nt, train=att.train, holdout=att.holdout, rng=rng
+        )
+    summary["fitted_to"] = "the final model's residual on the training blocks"
+    return summary
 
 
 def _attribute_reviewed(

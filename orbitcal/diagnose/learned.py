@@ -67,12 +67,14 @@ from orbitcal.field.synthesis import (
 from orbitcal.metrics import norm_rms_nt
 
 __all__ = [
+    "LEARNED_MIN_TIMES_NOISE",
     "LEGENDRE_ORDER",
     "N_HIDDEN",
     "SH_MAX_DEGREE",
     "learned_field_error",
     "learned_field_model",
     "legendre_design",
+    "not_fitted_summary",
     "sh_design_nec",
 ]
 
@@ -99,6 +101,11 @@ SH_DAMPING = (0.03, 0.3, 3.0)
 NET_MAX_SAMPLES = 2000
 #: Relative drop of the last training fold's RMS the network must bring to be kept.
 NET_MIN_GAIN = 0.01
+#: The summary of what the final model leaves is fitted only when its held-out residual per
+#: component exceeds the white-noise floor by more than this factor [-]: within 10 % of the floor
+#: no more than 0.46 sigma of structure can remain (sqrt(1.1^2 - 1)), and on a day at 1 Hz whose
+#: effect the final model takes up the fit was a quarter of the diagnosis's time.
+LEARNED_MIN_TIMES_NOISE = 1.1
 _CHUNK = 1024
 _GM_EARTH_KM3_S2 = 398600.4418  # orbital period of the training samples, for the span check
 _POLE_EPS_RAD = 1e-9
@@ -407,6 +414,19 @@ def _training_folds(t: FloatArray, train: BoolArray) -> tuple[npt.NDArray[np.int
     return fold, len(used)
 
 
+def not_fitted_summary(reason: str) -> dict[str, Any]:
+    """The summary of a learned model not fitted, and why (``fitted`` False, ``not_fitted_reason``),
+    with the model's fixed settings."""
+    return {
+        "method": _METHOD,
+        "fitted": False,
+        "not_fitted_reason": reason,
+        "stage_chosen": "none",
+        "legendre_order": LEGENDRE_ORDER,
+        "hidden_nodes": N_HIDDEN,
+    }
+
+
 def learned_field_error(
     data: DiagnosisData,
     residual_body_nt: FloatArray,
@@ -633,16 +653,20 @@ def _fit_stages(
     return _Stages(cv_ms, sh, sh_pred, leg, coef, inside_box, stage)
 
 
+_METHOD = (
+    "CN109855623A: regional Legendre polynomials + BP network, with a global "
+    "internal spherical-harmonic stage chosen by cross-validation on the training blocks"
+)
+
+
 def _stage_summary(stages: _Stages) -> dict[str, Any]:
     """The summary's keys about step 2: the method, the chosen stage, the cross-validation and
     the spherical-harmonic stage's degree, damping and spectrum."""
     sh = stages.sh
     deg = int(sh["degree"])
     return {
-        "method": (
-            "CN109855623A: regional Legendre polynomials + BP network, with a global "
-            "internal spherical-harmonic stage chosen by cross-validation on the training blocks"
-        ),
+        "method": _METHOD,
+        "fitted": True,
         "stage_chosen": stages.chosen,
         "cv_rms_nt": {k: float(np.sqrt(v)) for k, v in stages.cv_ms.items()},
         "legendre_order": LEGENDRE_ORDER,
