@@ -105,6 +105,35 @@ def test_a_rotation_is_judged_on_the_wander_along_the_main_field() -> None:
     )
 
 
+def test_beside_a_rotation_every_effect_is_judged_on_the_wander_along_the_main_field() -> None:
+    """Beside a kept attitude error, the residual's wander across B is that error's remainder: a
+    crust of 1 nT is not withdrawn for it (independent world 12100 no. 3: withdrawn beside 1.11 nT
+    of wander). Without the rotation among the kept effects, the crust is judged on the whole
+    residual as before, and beside a wandering offset (along B as much as across) it is still
+    within the noise."""
+    t = np.arange(0.0, 6 * 3600.0, 10.0)
+    n = t.size
+    samples = np.ones(n, dtype=bool)
+    phase = 2 * np.pi * t / 5650.0
+    b_unit = np.column_stack([np.cos(phase), np.zeros(n), np.sin(phase)])
+    across = np.cross([0.0, 1.0, 0.0], b_unit)
+    rotation = 12.0 * np.sin(2 * phase)[:, None] * across
+    crust = 1.0 * np.column_stack([np.sin(7 * phase), np.cos(5 * phase), np.sin(3 * phase)])
+    crust *= 1.0 / np.sqrt(np.mean((crust - crust.mean(axis=0)) ** 2))  # 1 nT per component
+    rng = np.random.default_rng(4)
+    white = rng.normal(scale=1.5, size=(n, 3))
+    walk = _walk(n, 5, 3.0)
+    remainder = white + np.einsum("ij,ij->i", walk, across)[:, None] * across
+    assert slow_wander_nt(t, remainder) > 1.0  # the crust alone is within the whole wander
+    span = float(t[-1])
+    both = {"attitude_error": rotation, "crustal_field": crust}
+    assert within_wander(t, remainder, both, samples, span, b_unit=b_unit) == {}
+    alone = within_wander(t, remainder, {"crustal_field": crust}, samples, span, b_unit=b_unit)
+    assert "crustal_field" in alone
+    offset_walk = white + walk
+    assert "crustal_field" in within_wander(t, offset_walk, both, samples, span, b_unit=b_unit)
+
+
 def test_spikes_do_not_make_a_wander() -> None:
     t = np.arange(0.0, 6 * 3600.0, 10.0)
     rng = np.random.default_rng(3)

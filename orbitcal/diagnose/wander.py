@@ -58,7 +58,11 @@ WITNESSED_RATIO = 1.0
 #: the model follows only in part) leaves its remainder across B, where it is no sign of a
 #: wandering offset. (Independent world 10900 no. 15: a real attitude error of 22 nT was
 #: withdrawn beside 3.4 nT of wander, most of it its own remainder. In 10600 no. 4 an unmodelled
-#: temperature wanders along B too, and the attitude error beside it stays withdrawn.)
+#: temperature wanders along B too, and the attitude error beside it stays withdrawn.) Beside
+#: such an effect every other effect is judged against the wander along B as well: what wanders
+#: across B is then that effect's remainder, not a sign of a wandering offset. (Independent world
+#: 12100 no. 3: a real crust of 0.99 nT beside an attitude error was withdrawn beside 1.11 nT of
+#: wander, most of it the attitude error's random walk across B.)
 ACROSS_B = frozenset({"attitude_error"})
 
 
@@ -105,8 +109,9 @@ def within_wander(
     samples by default, the wander) [nT], for those whose variation is below the wander /
     :data:`WANDER_RATIO`. The variation is taken beyond the training samples: a field that is
     flat there (a sensor temperature that starts changing in the held-out blocks) would
-    otherwise count as none. With ``b_unit`` (the main field's direction at every sample), the
-    effects of :data:`ACROSS_B` are judged against the wander of the residual along it."""
+    otherwise count as none. With ``b_unit`` (the main field's direction at every sample) and an
+    effect of :data:`ACROSS_B` among ``fields_nt``, every effect is judged against the wander of
+    the residual along it."""
     if span_s < WANDER_MIN_SPAN_S or int(samples.sum()) < 10:
         return {}
     where = np.ones(t_s.size, dtype=bool) if field_samples is None else field_samples
@@ -114,14 +119,15 @@ def within_wander(
     if not np.isfinite(wander):
         return {}
     along = wander
-    if b_unit is not None and any(name in ACROSS_B for name in fields_nt):
+    across_kept = b_unit is not None and any(name in ACROSS_B for name in fields_nt)
+    if b_unit is not None and across_kept:
         r_par = np.einsum("ij,ij->i", residual_nt[samples], b_unit[samples])[:, None]
         along = slow_wander_nt(t_s[samples], r_par)  # finite: the same windows as ``wander``
     out = {}
     for name, f in fields_nt.items():
         variation = field_variation_nt(f[where])
         ratio = WITNESSED_RATIO if name in WITNESSED else WANDER_RATIO
-        w = along if name in ACROSS_B else wander
+        w = along if across_kept else wander
         if w > ratio * variation:
             out[name] = (variation, w)
     return out
