@@ -225,16 +225,21 @@ def _coupling_line(report: dict[str, object], injected: dict[str, object]) -> st
     if mtq is None:
         return "The diagnosis named no magnetorquer coupling."
     k_nt_per_a = 1e3 * np.asarray(injected["K_nt_per_ma"])
+    intervals = mtq.get("param_intervals_90") or {}
     diffs = []
+    covered = 0
     for i, axis in enumerate("xyz"):
         for j, ch in enumerate(MAG_CURRENTS):
             key = f"current_coupling_{axis}_{ch.lower()}_ma_nt_per_a"
             if key in mtq["params"]:
                 diffs.append(abs(mtq["params"][key] - k_nt_per_a[i, j]))
+                lo, hi = intervals.get(key, (np.nan, np.nan))
+                covered += bool(lo <= k_nt_per_a[i, j] <= hi)
     return (
         f"The diagnosis's magnetorquer coupling of the torquer currents ({len(diffs)} of "
         f"{k_nt_per_a.size}: idle coils left out) against the injected one: largest difference "
-        f"{max(diffs):.2f} nT/A (injected |K| up to {np.abs(k_nt_per_a).max():.0f} nT/A)."
+        f"{max(diffs):.2f} nT/A (injected |K| up to {np.abs(k_nt_per_a).max():.0f} nT/A); "
+        f"{covered} of {len(diffs)} injected values inside their 90 % intervals."
     )
 
 
