@@ -21,15 +21,17 @@ import numpy as np
 import numpy.typing as npt
 
 from orbitcal.arrays import FloatArray
-from orbitcal.diagnose.calibration_columns import (
-    calibration_r_inv,
-    calibration_r_inv_of,
-    calibration_rows,
-)
+from orbitcal.diagnose.calibration_columns import calibration_r_inv, calibration_rows
 from orbitcal.diagnose.data import FIELD_SCALE_NT, DiagnosisData
 from orbitcal.diagnose.design import DesignBlock
 
-__all__ = ["FIT_BLOCK_SAMPLES", "FIT_MAX_SAMPLES", "BlockedDesign", "estimation_samples"]
+__all__ = [
+    "FIT_BLOCK_SAMPLES",
+    "FIT_MAX_SAMPLES",
+    "BlockedDesign",
+    "estimation_samples",
+    "estimation_step",
+]
 
 IntArray = npt.NDArray[np.intp]
 
@@ -47,11 +49,17 @@ FIT_BLOCK_SAMPLES = 2048
 FIT_MAX_SAMPLES = 20_000
 
 
+def estimation_step(n: int) -> int:
+    """The k of :func:`estimation_samples` for ``n`` samples: ceil(n / FIT_MAX_SAMPLES), at
+    least 1."""
+    return max(1, -(-n // FIT_MAX_SAMPLES))
+
+
 def estimation_samples(fit_mask: npt.NDArray[np.bool_]) -> IntArray:
     """The samples a fit of ``fit_mask`` estimates its parameters on: all of them up to
     :data:`FIT_MAX_SAMPLES`, else every k-th (k = ceil(n / FIT_MAX_SAMPLES))."""
     index = np.flatnonzero(fit_mask)
-    step = -(-index.size // FIT_MAX_SAMPLES)
+    step = estimation_step(index.size)
     return index[::step] if step > 1 else index
 
 
@@ -79,7 +87,7 @@ def _effect_scales(data: DiagnosisData, block: DesignBlock) -> FloatArray:
     root mean square, so that the normal equations stay invertible. A column's scale depends on
     that column only, so it is kept with the block (a frozen dataclass: stored beside its fields)
     for every fit. Beyond :data:`FIT_MAX_SAMPLES` samples, the root mean squares are read on
-    every k-th sample (:func:`estimation_samples` of all), as the fits estimate on.
+    every k-th sample (:func:`estimation_step`), as the fits estimate on.
     """
     cache: dict[int, tuple[weakref.ref[DiagnosisData], FloatArray]]
     cache = block.__dict__.setdefault("_scale_cache", {})
@@ -91,36 +99,22 @@ def _effect_scales(data: DiagnosisData, block: DesignBlock) -> FloatArray:
     # |e|^2 - |Q^T e|^2 (Q orthonormal), with Q^T e = R^-T X^T e.
     sum_sq = np.zeros(q)
     x_t_eff = np.zeros((12, q))
-    index = estimation_samples(np.ones(data.n, dtype=bool))
-    parts: Iterator[IntArray | slice]
-    if index.size == data.n:
-        parts = (slice(a, a + FIT_BLOCK_SAMPLES) for a in range(0, data.n, FIT_BLOCK_SAMPLES))
-        r_inv = calibration_r_inv(data)
-    else:  # a scale is a root mean square: the samples a fit estimates on tell it as well
-        parts = (index[a : a + FIT_BLOCK_SAMPLES] for a in range(0, index.size, FIT_BLOCK_SAMPLES))
-        r_inv = _thinned_r_inv(data, index)
-    for part in parts:
+    # A scale is a root mean square: every k-th sample, as a fit of all samples estimates on
+    # (estimation_samples), tells it as well; read as views, FIT_BLOCK_SAMPLES at a time.
+    step = estimation_step(data.n)
+    span = FIT_BLOCK_SAMPLES * step
+    for a in range(0, data.n, span):
+        part = slice(a, min(a + span, data.n), step)
         eff = block.rows(part).reshape(-1, q)
         sum_sq += np.sum(eff**2, axis=0)
         x_t_eff += calibration_rows(data, part).T @ eff
-    q_eff = r_inv.T @ x_t_eff
-    n_rows = 3 * index.size
+    q_eff = calibration_r_inv(data, step).T @ x_t_eff
+    n_rows = 3 * len(range(0, data.n, step))
     rest_sq = np.clip(sum_sq - np.sum(q_eff**2, axis=0), 0.0, None)
     raw = np.sqrt(sum_sq / n_rows)
     scale = np.maximum(np.sqrt(rest_sq / n_rows), 1e-6 * raw)
     cache[id(data)] = (weakref.ref(data), scale)
     return scale
-
-
-#: ``R^-1`` of the calibration columns on the thinned samples of the column scales, per data set.
-_R_INV_THINNED: weakref.WeakKeyDictionary[DiagnosisData, FloatArray] = weakref.WeakKeyDictionary()
-
-
-def _thinned_r_inv(data: DiagnosisData, index: IntArray) -> FloatArray:
-    hit = _R_INV_THINNED.get(data)
-    if hit is None:
-        hit = _R_INV_THINNED[data] = calibration_r_inv_of(data, index)
-    return hit
 
 
 class BlockedDesign:

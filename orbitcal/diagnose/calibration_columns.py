@@ -23,8 +23,11 @@ from orbitcal.diagnose.data import FIELD_SCALE_NT, DiagnosisData
 
 __all__ = ["calibration_r_inv", "calibration_r_inv_of", "calibration_rows"]
 
-#: ``R^-1`` of all samples, per data set (weakly: a data set dropped drops its factor).
-_R_INV_ALL: weakref.WeakKeyDictionary[DiagnosisData, FloatArray] = weakref.WeakKeyDictionary()
+#: ``R^-1`` of every ``step``-th sample, per data set and step (weakly: a data set dropped drops
+#: its factors).
+_R_INV: weakref.WeakKeyDictionary[DiagnosisData, dict[int, FloatArray]] = (
+    weakref.WeakKeyDictionary()
+)
 
 
 def calibration_rows(data: DiagnosisData, index: Index) -> FloatArray:
@@ -47,9 +50,11 @@ def calibration_r_inv_of(data: DiagnosisData, index: npt.NDArray[np.intp]) -> Fl
     return np.asarray(np.linalg.inv(triangular_factor(blocks, 12)), dtype=np.float64)
 
 
-def calibration_r_inv(data: DiagnosisData) -> FloatArray:
-    """:func:`calibration_r_inv_of` all samples, computed once per data set."""
-    hit = _R_INV_ALL.get(data)
+def calibration_r_inv(data: DiagnosisData, step: int = 1) -> FloatArray:
+    """:func:`calibration_r_inv_of` every ``step``-th sample (all by default), computed once per
+    data set and step."""
+    by_step = _R_INV.setdefault(data, {})
+    hit = by_step.get(step)
     if hit is None:
-        hit = _R_INV_ALL[data] = calibration_r_inv_of(data, np.arange(data.n))
+        hit = by_step[step] = calibration_r_inv_of(data, np.arange(0, data.n, step))
     return hit
