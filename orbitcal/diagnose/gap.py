@@ -8,7 +8,7 @@ module says it: the white-noise floor of the final residual (:func:`noise_floor_
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -120,6 +120,61 @@ def refusal(e: dict[str, Any]) -> str:
     )
 
 
+#: Statuses of a candidate's own entry that say more than its held-out test beside the final
+#: model (the span cannot tell it, its gain came with a wander, there was no eclipse, ...).
+_OWN_REFUSALS = (
+    "not significant on correlated chunks",
+    "immaterial",
+    "weak",
+    "wander",
+    "unlit",
+    "possible residue",
+)
+
+
+def _closest_beside(
+    report: dict[str, Any],
+    beside: tuple[Sequence[str], Mapping[str, Mapping[str, Any]]],
+    final_rms_nt: float,
+) -> list[dict[str, Any]]:
+    """The three candidates of ``beside`` (not in the final model) that leave the least
+    held-out residual beside it, with their numbers there and why each was refused."""
+    from orbitcal.metrics import rms_nt_from_norm
+
+    kept, judged = beside
+    by_name = {e["name"]: e for e in report["effects"]}
+    words = ", ".join(kept)
+    out = []
+    for name, v in sorted(judged.items(), key=lambda kv: kv[1]["holdout_rms_nt"])[:3]:
+        e = by_name.get(name, {})
+        after = float(v["holdout_rms_nt"])
+        shrink = final_rms_nt / max(after, 1e-12)
+        if v.get("implausible"):
+            why = f"implausible beside {words}: {v['implausible']}"
+        elif e.get("inseparable") or e.get("status") in _OWN_REFUSALS:
+            why = refusal(e)
+        elif float(v["p_value"]) < float(v["level"]):
+            why = (
+                f"too small beside {words}: held-out shrink {shrink:.4g} (p = "
+                f"{float(v['p_value']):.3g}), below the least gain an effect must bring"
+            )
+        else:
+            why = (
+                f"not significant beside {words}: held-out shrink {shrink:.4g} (p = "
+                f"{float(v['p_value']):.3g}, above the step's level {float(v['level']):.3g}, "
+                "Bonferroni over its candidates)"
+            )
+        out.append(
+            {
+                "name": name,
+                "holdout_rms_after_nt": round(float(rms_nt_from_norm(after)), 4),
+                "shrink": round(shrink, 4),
+                "refused_because": why,
+            }
+        )
+    return out
+
+
 def deciders(names: Sequence[str]) -> str:
     """What data would tell ``names`` from the calibration, each idea once."""
     from orbitcal.diagnose.report import SEPARATING_DATA
@@ -144,17 +199,33 @@ def gap_section(
     rms_nt: float,
     holdout: BoolArray,
     inseparable: Sequence[str] = (),
+    beside: tuple[Sequence[str], Mapping[str, Mapping[str, Any]]] | None = None,
 ) -> dict[str, Any]:
+    """The ``gap`` section: the final held-out residual against the noise floor, where it lies,
+    the candidates that came closest to explaining it and why each was refused, and what data
+    would decide.
+
+    ``beside``: the effects of the final model and each other candidate fitted beside them
+    (:attr:`orbitcal.diagnose.attribution.Attribution.beside_final`); the closest candidates are
+    then judged on what the final model leaves, not against the calibration alone.
+    """
     from orbitcal.diagnose.report import SEPARATING_DATA
 
     sigma, rms, times = noise_ratio(residual_nt, rms_nt, holdout)
     unexplained = bool(np.isfinite(times) and times > GAP_TIMES_NOISE)
     excess = float(np.sqrt(max(rms**2 - sigma**2, 0.0))) if np.isfinite(sigma) else float("nan")
     where = (report.get("final") or {}).get("where") or report.get("where") or {}
-    closest = sorted(
-        (e for e in report["effects"] if not e["significant"]),
-        key=lambda e: (e.get("holdout_rms_after_nt") is None, e.get("holdout_rms_after_nt") or 0.0),
-    )[:3]
+    closest = (
+        _closest_beside(report, beside, rms_nt)
+        if beside is not None
+        else sorted(
+            (e for e in report["effects"] if not e["significant"]),
+            key=lambda e: (
+                e.get("holdout_rms_after_nt") is None,
+                e.get("holdout_rms_after_nt") or 0.0,
+            ),
+        )[:3]
+    )
     decide = [
         *dict.fromkeys(SEPARATING_DATA[e["name"]] for e in closest if e["name"] in SEPARATING_DATA),
         *GENERAL_DECIDERS,
@@ -176,10 +247,11 @@ def gap_section(
                 "name": e["name"],
                 "holdout_rms_after_nt": e.get("holdout_rms_after_nt"),
                 "shrink": e.get("shrink"),
-                "refused_because": refusal(e),
+                "refused_because": e["refused_because"] if "refused_because" in e else refusal(e),
             }
             for e in closest
         ],
+        "closest_judged_beside": [] if beside is None else list(beside[0]),
         "would_decide": decide,
         "inseparable": list(inseparable),
     }

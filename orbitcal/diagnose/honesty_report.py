@@ -103,6 +103,11 @@ def review_report(
         rv.final.rms_nt,
         att.holdout,
         inseparable_candidates(att),
+        beside=(
+            (list(rv.keep), att.beside_final)
+            if att.beside_final and sorted(rv.keep) == sorted(att.beside_final_of)
+            else None
+        ),
     )
     absorbed = absorbed_candidates(att)
     report["gap"]["absorbed_by_calibration"] = absorbed

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -455,4 +456,25 @@ def attribute(
         dropped=[n for n in stepwise.dropped if n not in excluded],
         fit_mask=None if fit_mask is None else np.asarray(fit_mask, dtype=bool),
         final_block_names=final_names,
+        **_beside_final(stepwise, [c.name for c in chosen]),
     )
+
+
+def _beside_final(stepwise: Stepwise, chosen: Sequence[str]) -> dict[str, Any]:
+    """:attr:`Attribution.beside_final` and ``beside_final_of`` from the selection's last step
+    (:attr:`Stepwise.last_step`), when it was beside the effects finally chosen."""
+    if not chosen or sorted(stepwise.last_step_beside) != sorted(chosen):
+        return {}
+    return {
+        "beside_final": {
+            name: {
+                "holdout_rms_nt": float(cand.holdout_rms_nt),
+                "p_value": float(cand.p_value),
+                "level": float(stepwise.last_step_level),
+                "gains": bool(cand.gains),
+                "implausible": reason,
+            }
+            for name, (cand, reason) in stepwise.last_step.items()
+        },
+        "beside_final_of": list(stepwise.last_step_beside),
+    }

@@ -137,6 +137,14 @@ class Attribution:
         The samples every fit was restricted to (None: all), as given to :func:`attribute`.
     final_block_names : list of str or None
         The effect of every block of ``fits["final"]``, in order (None: not recorded).
+    beside_final : dict of str to dict
+        The candidates left out, each fitted beside the selected effects at the selection's
+        last step: ``holdout_rms_nt`` (vector) and ``p_value`` of the held-out chunk test
+        against the selected effects alone, the step's ``level``, whether it ``gains`` the
+        minimum shrink, and ``implausible`` (the reason, or None). Empty
+        when the selection's last step was not beside the effects finally selected.
+    beside_final_of : list of str
+        The selected effects the candidates of ``beside_final`` were fitted beside.
     """
 
     baseline_rms_nt: float
@@ -158,6 +166,8 @@ class Attribution:
     dropped: list[str] = field(default_factory=list)
     fit_mask: BoolArray | None = None
     final_block_names: list[str] | None = None
+    beside_final: dict[str, dict[str, Any]] = field(default_factory=dict)
+    beside_final_of: list[str] = field(default_factory=list)
 
 
 def _params(fit: JointFit, k: int) -> dict[str, Any]:

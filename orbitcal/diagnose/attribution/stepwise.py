@@ -40,6 +40,14 @@ class Stepwise:
         The candidates indistinguishable from each selected one.
     dropped : list of str
         Names dropped by the backward step (they do not re-enter).
+    last_step : dict of str to (Candidate, str or None)
+        The candidates of the latest forward step at which none passed, fitted beside the
+        effects then chosen (:attr:`last_step_beside`), each with its reason if implausible:
+        what came closest to explaining what the selection left.
+    last_step_beside : list of str
+        The effects chosen at that step.
+    last_step_level : float
+        The significance level of that step (Bonferroni over its candidates).
     """
 
     sel: GroupSelection
@@ -51,6 +59,9 @@ class Stepwise:
     chosen: list[Candidate] = field(default_factory=list)
     twins: dict[str, list[str]] = field(default_factory=dict)
     dropped: list[str] = field(default_factory=list)
+    last_step: dict[str, tuple[Candidate, str | None]] = field(default_factory=dict)
+    last_step_beside: list[str] = field(default_factory=list)
+    last_step_level: float = float("nan")
 
     def run(self, rounds: int = 3) -> tuple[list[Candidate], dict[str, list[str]], list[str]]:
         """Forward steps, a swap pass, then backward elimination; again while the backward step
@@ -144,7 +155,9 @@ class Stepwise:
                 return cand, sel.implausible_reason(fixed, cand, level, rms, r)
 
             # each candidate fitted and judged alone (side by side on sel.workers threads)
+            step: dict[str, tuple[Candidate, str | None]] = {}
             for name, (cand, reason) in zip(remaining, sel.map(judged, remaining), strict=True):
+                step[name] = (cand, reason)
                 tried.append(cand)
                 if reason is not None:
                     implausible[name] = reason
@@ -152,6 +165,9 @@ class Stepwise:
                 if cand.passes(level):
                     passing.append(cand)
             new: list[Candidate]
+            if not passing:
+                self.last_step, self.last_step_beside = step, [c.name for c in chosen]
+                self.last_step_level = level
             if passing:
                 best, tw = sel.pick(passing)
                 if tw:
