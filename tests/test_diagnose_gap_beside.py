@@ -86,3 +86,52 @@ def test_without_a_record_beside_the_final_model_the_single_fits_are_quoted(
     }
     for c in gap["closest_candidates"]:
         assert c["holdout_rms_after_nt"] == single[c["name"]]
+
+
+def test_contained_fraction_is_what_the_calibration_leaves_taken_up_by_the_others() -> None:
+    """A time-tag error's field: wholly inside its own template; inside the along-track orbit
+    error's under a tumbling attitude (that template shifts the whole sample in time); not
+    inside a storm's or a crust's."""
+    from test_diagnose_worlds import make_world
+
+    from orbitcal.diagnose.attribution import fit_joint, time_blocks
+    from orbitcal.diagnose.attribution.uncertainty import contained_fraction
+    from orbitcal.diagnose.effects import get_effect
+
+    d = make_world("time_offset", attitude="tumbling", seed=3).data
+    train, _, _ = time_blocks(d.t_utc_s)
+    own = get_effect("time_offset").design(d, train)
+    assert own is not None
+    f = fit_joint(d, train, [own]).effect_nt(0)
+    orbit = get_effect("orbit_error").design(d, train)
+    storm = get_effect("external_field").design(d, train)
+    assert orbit is not None and storm is not None
+    assert contained_fraction(d, train, [own], f) == pytest.approx(1.0, abs=1e-9)
+    in_orbit = contained_fraction(d, train, [orbit], f)
+    in_storm = contained_fraction(d, train, [storm], f)
+    assert in_orbit is not None and in_orbit > 0.99
+    assert in_storm is not None and in_storm < 0.1
+    # a field the calibration takes whole leaves nothing to share out
+    assert contained_fraction(d, train, [own], d.b_ref_body_nt * 1e-3) is None
+
+
+def test_a_candidate_contained_in_the_final_model_is_refused_as_such() -> None:
+    from orbitcal.diagnose.gap import CONTAINED_LIMIT, _closest_beside
+
+    report = {"effects": [{"name": "time_offset", "significant": False, "status": None}]}
+    judged = {
+        "time_offset": {
+            "holdout_rms_nt": 4.0,
+            "p_value": 0.3,
+            "level": 0.006,
+            "gains": False,
+            "implausible": None,
+            "contained": CONTAINED_LIMIT + 0.05,
+        }
+    }
+    (c,) = _closest_beside(report, (["orbit_error"], judged), 4.1)
+    assert c["refused_because"].startswith("contained in the model of orbit_error: ")
+    judged["time_offset"]["contained"] = CONTAINED_LIMIT - 0.05
+    (c,) = _closest_beside(report, (["orbit_error"], judged), 4.1)
+    assert c["refused_because"].startswith("not significant beside orbit_error: ")
+    assert "0.006" in c["refused_because"]

@@ -120,6 +120,12 @@ def refusal(e: dict[str, Any]) -> str:
     )
 
 
+#: A candidate whose field (fitted alone), beyond what the calibration takes of it, the final
+#: model's effects could take up to this share is refused as contained in their model: the
+#: held-out blocks cannot tell it from them. A time-tag error beside an along-track orbit error
+#: under nadir pointing is one.
+CONTAINED_LIMIT = 0.9
+
 #: Statuses of a candidate's own entry that say more than its held-out test beside the final
 #: model (the span cannot tell it, its gain came with a wander, there was no eclipse, ...).
 _OWN_REFUSALS = (
@@ -149,7 +155,14 @@ def _closest_beside(
         e = by_name.get(name, {})
         after = float(v["holdout_rms_nt"])
         shrink = final_rms_nt / max(after, 1e-12)
-        if v.get("implausible"):
+        contained = v.get("contained")
+        if contained is not None and contained >= CONTAINED_LIMIT:
+            why = (
+                f"contained in the model of {words}: of its field (fitted alone), what the "
+                f"calibration leaves is {contained:.0%} a change of their parameters on this "
+                "span, so the data cannot tell whether it is present beside them"
+            )
+        elif v.get("implausible"):
             why = f"implausible beside {words}: {v['implausible']}"
         elif e.get("inseparable") or e.get("status") in _OWN_REFUSALS:
             why = refusal(e)

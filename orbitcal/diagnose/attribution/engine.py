@@ -25,6 +25,7 @@ from orbitcal.diagnose.attribution.uncertainty import (
     _intervals,
     _shrink_interval,
     _verdict_confidence,
+    contained_fraction,
     template_systematic,
     through_sensor,
 )
@@ -456,25 +457,40 @@ def attribute(
         dropped=[n for n in stepwise.dropped if n not in excluded],
         fit_mask=None if fit_mask is None else np.asarray(fit_mask, dtype=bool),
         final_block_names=final_names,
-        **_beside_final(stepwise, [c.name for c in chosen]),
+        **_beside_final(data, split.train, stepwise, chosen),
     )
 
 
-def _beside_final(stepwise: Stepwise, chosen: Sequence[str]) -> dict[str, Any]:
+#: The candidates of the selection's last step whose containment in the chosen effects' model
+#: is measured (:func:`_beside_final`): those the gap section may name as closest.
+BESIDE_CONTAINED = 3
+
+
+def _beside_final(
+    data: DiagnosisData, train: BoolArray, stepwise: Stepwise, chosen: Sequence[Candidate]
+) -> dict[str, Any]:
     """:attr:`Attribution.beside_final` and ``beside_final_of`` from the selection's last step
-    (:attr:`Stepwise.last_step`), when it was beside the effects finally chosen."""
-    if not chosen or sorted(stepwise.last_step_beside) != sorted(chosen):
+    (:attr:`Stepwise.last_step`), when it was beside the effects finally chosen; for the
+    :data:`BESIDE_CONTAINED` candidates that leave the least held-out residual there, the share
+    of their single fit's field the chosen effects and the calibration could take up
+    (``contained``, :func:`contained_fraction`)."""
+    names = [c.name for c in chosen]
+    if not names or sorted(stepwise.last_step_beside) != sorted(names):
         return {}
-    return {
-        "beside_final": {
-            name: {
-                "holdout_rms_nt": float(cand.holdout_rms_nt),
-                "p_value": float(cand.p_value),
-                "level": float(stepwise.last_step_level),
-                "gains": bool(cand.gains),
-                "implausible": reason,
-            }
-            for name, (cand, reason) in stepwise.last_step.items()
-        },
-        "beside_final_of": list(stepwise.last_step_beside),
-    }
+    closest = sorted(stepwise.last_step, key=lambda n: stepwise.last_step[n][0].holdout_rms_nt)
+    blocks = [c.block for c in chosen]
+    out: dict[str, dict[str, Any]] = {}
+    for name, (cand, reason) in stepwise.last_step.items():
+        out[name] = {
+            "holdout_rms_nt": float(cand.holdout_rms_nt),
+            "p_value": float(cand.p_value),
+            "level": float(stepwise.last_step_level),
+            "gains": bool(cand.gains),
+            "implausible": reason,
+            "contained": None,
+        }
+        single = stepwise.single.get(name)
+        if name in closest[:BESIDE_CONTAINED] and single is not None and single.fit.blocks:
+            f = single.fit.effect_nt(len(single.fit.blocks) - 1)
+            out[name]["contained"] = contained_fraction(data, train, blocks, f)
+    return {"beside_final": out, "beside_final_of": names}

@@ -257,3 +257,32 @@ def _autocorr_inflation(r: FloatArray, max_lag: int = 200) -> float:
             break
         total += 2.0 * rho
     return total
+
+
+def contained_fraction(
+    data: DiagnosisData, train: BoolArray, blocks: Sequence[DesignBlock], f_nt: FloatArray
+) -> float | None:
+    """Share of what the calibration leaves of the field ``f_nt`` (N, 3) that ``blocks`` take
+    up when fitted with it: least-squares residuals of its training rows (every k-th beyond
+    :data:`~orbitcal.diagnose.blocked.FIT_MAX_SAMPLES`) on the calibration's columns alone and
+    with ``blocks``' columns, ``1 - |r_with|^2 / |r_calibration|^2``. Near 1: beside those
+    effects the data cannot tell whether the field is there. None when the calibration takes
+    the field whole (its own absorbed fraction says so)."""
+    from orbitcal.diagnose.blocked import estimation_samples
+    from orbitcal.diagnose.calibration_columns import calibration_rows
+
+    idx = estimation_samples(train)
+    if idx.size == 0:
+        return None
+    y = f_nt[idx].reshape(-1)
+    cal = calibration_rows(data, idx)
+
+    def rss(x: FloatArray) -> float:
+        r = y - x @ np.linalg.lstsq(x, y, rcond=None)[0]
+        return float(r @ r)
+
+    left = rss(cal)
+    if left <= 1e-12 * max(float(y @ y), 1e-300):
+        return None
+    x = np.concatenate([cal, *(b.rows(idx).reshape(-1, b.width) for b in blocks)], axis=1)
+    return float(min(1.0, max(0.0, 1.0 - rss(x) / left)))
