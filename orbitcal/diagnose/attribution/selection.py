@@ -76,6 +76,11 @@ class Candidate:
         return self.design if self.design is not None else self.fit.blocks[-1]
 
 
+#: Beside a kept attitude error, other effects are judged on the held-out residual along B.
+ALONG_B_BESIDE_ACROSS = True
+#: Effects whose own field lies across B: never judged along it.
+ACROSS_B_OWN = frozenset({"field_aligned_currents"})
+
 #: Tied candidates (held-out chunks cannot tell them apart) whose training BIC exceeds the
 #: winner's by less than this are reported as indistinguishable from it: a BIC difference below
 #: 10 (2 ln of the Bayes factor) is not "very strong" evidence (Kass & Raftery 1995).
@@ -188,11 +193,35 @@ class Selection:
         sup, chunks = _support(
             fit, self.train, self.holdout, self.n_chunks, self.n_chunks_local, k=k
         )
+        if self.along_b(fit, k):
+            b_unit = self._b_unit()
+            r_before = np.sum(r_before * b_unit, axis=1)[:, None]
+            r = np.sum(r * b_unit, axis=1)[:, None]
+            rms_after = norm_rms_nt(r[self.holdout])
+            rms_before = norm_rms_nt(r_before[self.holdout])
         p, mean_log = _chunk_test(r_before[sup], r[sup], chunks)
         ok = float(np.exp(-0.5 * mean_log)) < 1.0 - self.min_gain
         if rms_after is not None and rms_before is not None:
             ok = ok or self.gains(rms_after, rms_before)
         return p, ok
+
+    def along_b(self, fit: JointFit, k: int = -1) -> bool:
+        """Whether block ``k`` of ``fit`` is judged on the residual's component along the main
+        field: beside an effect whose unforecast part lies across B (an attitude error's
+        random walk, :data:`~orbitcal.diagnose.wander.ACROSS_B`), for an effect of its own."""
+        from orbitcal.diagnose.wander import ACROSS_B
+
+        if not ALONG_B_BESIDE_ACROSS:
+            return False
+        kk = k % len(fit.blocks)
+        own = fit.blocks[kk].effect
+        if own in ACROSS_B or own in ACROSS_B_OWN:
+            return False
+        return any(b.effect in ACROSS_B for j, b in enumerate(fit.blocks) if j != kk)
+
+    def _b_unit(self) -> FloatArray:
+        b = self.data.b_ref_body_nt
+        return np.asarray(b / np.maximum(np.linalg.norm(b, axis=1), 1e-9)[:, None])
 
     def gains(self, rms_after: float, rms_before: float) -> bool:
         """Whether the held-out RMS shrinks by at least ``min_gain``."""
