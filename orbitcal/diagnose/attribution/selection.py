@@ -76,7 +76,7 @@ class Candidate:
         return self.design if self.design is not None else self.fit.blocks[-1]
 
 
-#: Beside a kept attitude error, other effects are judged on the held-out residual along B.
+#: Beside an attitude error, other effects are judged on the held-out residual along B too.
 ALONG_B_BESIDE_ACROSS = True
 #: Effects whose own field lies across B: never judged along it.
 ACROSS_B_OWN = frozenset({"field_aligned_currents"})
@@ -193,12 +193,36 @@ class Selection:
         sup, chunks = _support(
             fit, self.train, self.holdout, self.n_chunks, self.n_chunks_local, k=k
         )
-        if self.along_b(fit, k):
-            b_unit = self._b_unit()
-            r_before = np.sum(r_before * b_unit, axis=1)[:, None]
-            r = np.sum(r * b_unit, axis=1)[:, None]
-            rms_after = norm_rms_nt(r[self.holdout])
-            rms_before = norm_rms_nt(r_before[self.holdout])
+        p, ok = self._chunk_judged(r_before, r, sup, chunks, rms_after, rms_before)
+        if not self.along_b(fit, k):
+            return p, ok
+        # Beside an attitude error, the same test on the component along B as well; the more
+        # significant of the two, its p doubled (Bonferroni over the two readings).
+        b_unit = self._b_unit()
+        par_before = np.sum(r_before * b_unit, axis=1)[:, None]
+        par = np.sum(r * b_unit, axis=1)[:, None]
+        p_par, ok_par = self._chunk_judged(
+            par_before,
+            par,
+            sup,
+            chunks,
+            norm_rms_nt(par[self.holdout]),
+            norm_rms_nt(par_before[self.holdout]),
+        )
+        if p_par < p:
+            p, ok = p_par, ok_par
+        return min(1.0, 2.0 * p), ok
+
+    def _chunk_judged(
+        self,
+        r_before: FloatArray,
+        r: FloatArray,
+        sup: Any,
+        chunks: int,
+        rms_after: float | None,
+        rms_before: float | None,
+    ) -> tuple[float, bool]:
+        """The chunk test's p on the samples ``sup`` and whether the shrink is enough."""
         p, mean_log = _chunk_test(r_before[sup], r[sup], chunks)
         ok = float(np.exp(-0.5 * mean_log)) < 1.0 - self.min_gain
         if rms_after is not None and rms_before is not None:
@@ -206,9 +230,10 @@ class Selection:
         return p, ok
 
     def along_b(self, fit: JointFit, k: int = -1) -> bool:
-        """Whether block ``k`` of ``fit`` is judged on the residual's component along the main
-        field: beside an effect whose unforecast part lies across B (an attitude error's
-        random walk, :data:`~orbitcal.diagnose.wander.ACROSS_B`), for an effect of its own."""
+        """Whether block ``k`` of ``fit`` is also judged on the residual's component along the
+        main field (:meth:`judge`): beside an effect whose unforecast part lies across B (an
+        attitude error's random walk, :data:`~orbitcal.diagnose.wander.ACROSS_B`), for an
+        effect of its own."""
         from orbitcal.diagnose.wander import ACROSS_B
 
         if not ALONG_B_BESIDE_ACROSS:
