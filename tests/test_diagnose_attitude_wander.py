@@ -11,7 +11,6 @@ of at least two cycles on it, and the fewest periods that predict the end of the
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
 
 import numpy as np
 import pytest
@@ -71,56 +70,3 @@ def test_a_wandering_attitude_error_is_named(seed):
     assert report["verdict"] == "attitude_error", report["verdict"]
     named = [e["name"] for e in report["effects"] if e.get("significant")]
     assert named == ["attitude_error"], named
-
-
-def _walk_beside(effect: str, attitude: str, seed: int):
-    """A world of ``test_diagnose_worlds.make_world`` with ``effect``, then the wandering
-    attitude error of :func:`_wandering_world` (0.08 deg flex, a walk of half that)."""
-    from test_diagnose_worlds import make_world
-
-    d = make_world(effect, attitude=attitude, seed=seed).data
-    t = d.t_utc_s - d.t_utc_s[0]
-    rng = np.random.default_rng(100 + seed)
-    amp_rad = np.radians(0.08)
-    flex = amp_rad * np.sin(4 * np.pi * t / ORBIT_S + 1.0)
-    walk = np.cumsum(rng.normal(size=(t.size, 3)), axis=0)
-    rotvec = 0.5 * amp_rad * walk / np.abs(walk).max() + np.outer(flex, [0.6, -0.5, 0.62])
-    return dataclasses.replace(d, b_raw_nt=d.b_raw_nt - np.cross(rotvec, d.b_ref_body_nt))
-
-
-@pytest.mark.parametrize(("attitude", "seed"), [("tumbling", 3), ("nadir", 1)])
-def test_a_crust_beside_a_wandering_attitude_error_is_judged_along_b(monkeypatch, attitude, seed):
-    """The walk's unforecast remainder lies across B; judged on the whole held-out residual the
-    crust beside it was not significant (independent worlds 12800 no. 5 and 9 alike). Judged on
-    the residual's component along B (selection.Selection.along_b) it is named."""
-    import orbitcal.diagnose.attribution.selection as selection
-
-    data = _walk_beside("crustal_field", attitude, seed)
-
-    def named() -> list[str]:
-        report = diagnose_data(data, rng=np.random.default_rng(0)).report.to_json()
-        return sorted(e["name"] for e in report["effects"] if e["significant"])
-
-    assert named() == ["attitude_error", "crustal_field"]
-    monkeypatch.setattr(selection, "ALONG_B_BESIDE_ACROSS", False)
-    assert named() == ["attitude_error"]
-
-
-def test_only_an_effect_of_its_own_beside_an_attitude_error_is_judged_along_b():
-    """The attitude error itself and the auroral currents (fields across B) keep the whole
-    residual; any other effect beside an attitude error reads the component along B."""
-    from types import SimpleNamespace
-
-    from orbitcal.diagnose.attribution.selection import Selection
-    from orbitcal.diagnose.design import DesignBlock
-
-    def fit_of(*effects: str) -> Any:
-        blocks = [DesignBlock(np.zeros((4, 3, 1)), [f"{e}_p"], effect=e) for e in effects]
-        return SimpleNamespace(blocks=blocks)
-
-    sel = Selection.__new__(Selection)
-    assert sel.along_b(fit_of("attitude_error", "crustal_field"))
-    assert sel.along_b(fit_of("attitude_error", "temperature", "orbit_error"), k=1)
-    assert not sel.along_b(fit_of("attitude_error", "field_aligned_currents"))
-    assert not sel.along_b(fit_of("crustal_field", "attitude_error"))
-    assert not sel.along_b(fit_of("temperature", "crustal_field"))

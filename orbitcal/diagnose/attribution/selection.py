@@ -76,11 +76,6 @@ class Candidate:
         return self.design if self.design is not None else self.fit.blocks[-1]
 
 
-#: Beside an attitude error, other effects are judged on the held-out residual along B too.
-ALONG_B_BESIDE_ACROSS = True
-#: Effects whose own field lies across B: never judged along it.
-ACROSS_B_OWN = frozenset({"field_aligned_currents"})
-
 #: Tied candidates (held-out chunks cannot tell them apart) whose training BIC exceeds the
 #: winner's by less than this are reported as indistinguishable from it: a BIC difference below
 #: 10 (2 ln of the Bayes factor) is not "very strong" evidence (Kass & Raftery 1995).
@@ -193,60 +188,11 @@ class Selection:
         sup, chunks = _support(
             fit, self.train, self.holdout, self.n_chunks, self.n_chunks_local, k=k
         )
-        p, ok = self._chunk_judged(r_before, r, sup, chunks, rms_after, rms_before)
-        if not self.along_b(fit, k):
-            return p, ok
-        # Beside an attitude error, the same test on the component along B as well; the more
-        # significant of the two, its p doubled (Bonferroni over the two readings).
-        b_unit = self._b_unit()
-        par_before = np.sum(r_before * b_unit, axis=1)[:, None]
-        par = np.sum(r * b_unit, axis=1)[:, None]
-        p_par, ok_par = self._chunk_judged(
-            par_before,
-            par,
-            sup,
-            chunks,
-            norm_rms_nt(par[self.holdout]),
-            norm_rms_nt(par_before[self.holdout]),
-        )
-        if p_par < p:
-            p, ok = p_par, ok_par
-        return min(1.0, 2.0 * p), ok
-
-    def _chunk_judged(
-        self,
-        r_before: FloatArray,
-        r: FloatArray,
-        sup: Any,
-        chunks: int,
-        rms_after: float | None,
-        rms_before: float | None,
-    ) -> tuple[float, bool]:
-        """The chunk test's p on the samples ``sup`` and whether the shrink is enough."""
         p, mean_log = _chunk_test(r_before[sup], r[sup], chunks)
         ok = float(np.exp(-0.5 * mean_log)) < 1.0 - self.min_gain
         if rms_after is not None and rms_before is not None:
             ok = ok or self.gains(rms_after, rms_before)
         return p, ok
-
-    def along_b(self, fit: JointFit, k: int = -1) -> bool:
-        """Whether block ``k`` of ``fit`` is also judged on the residual's component along the
-        main field (:meth:`judge`): beside an effect whose unforecast part lies across B (an
-        attitude error's random walk, :data:`~orbitcal.diagnose.wander.ACROSS_B`), for an
-        effect of its own."""
-        from orbitcal.diagnose.wander import ACROSS_B
-
-        if not ALONG_B_BESIDE_ACROSS:
-            return False
-        kk = k % len(fit.blocks)
-        own = fit.blocks[kk].effect
-        if own in ACROSS_B or own in ACROSS_B_OWN:
-            return False
-        return any(b.effect in ACROSS_B for j, b in enumerate(fit.blocks) if j != kk)
-
-    def _b_unit(self) -> FloatArray:
-        b = self.data.b_ref_body_nt
-        return np.asarray(b / np.maximum(np.linalg.norm(b, axis=1), 1e-9)[:, None])
 
     def gains(self, rms_after: float, rms_before: float) -> bool:
         """Whether the held-out RMS shrinks by at least ``min_gain``."""
