@@ -143,15 +143,18 @@ def _closest_beside(
     beside: tuple[Sequence[str], Mapping[str, Mapping[str, Any]]],
     final_rms_nt: float,
 ) -> list[dict[str, Any]]:
-    """The three candidates of ``beside`` (not in the final model) that leave the least
-    held-out residual beside it, with their numbers there and why each was refused."""
+    """The :data:`~orbitcal.diagnose.attribution.engine.CLOSEST_CANDIDATES` of ``beside`` (not
+    in the final model) that leave the least held-out residual beside it, with their numbers
+    there and why each was refused."""
+    from orbitcal.diagnose.attribution.engine import CLOSEST_CANDIDATES
     from orbitcal.metrics import rms_nt_from_norm
 
     kept, judged = beside
     by_name = {e["name"]: e for e in report["effects"]}
     words = ", ".join(kept)
     out = []
-    for name, v in sorted(judged.items(), key=lambda kv: kv[1]["holdout_rms_nt"])[:3]:
+    ranked = sorted(judged.items(), key=lambda kv: kv[1]["holdout_rms_nt"])
+    for name, v in ranked[:CLOSEST_CANDIDATES]:
         e = by_name.get(name, {})
         after = float(v["holdout_rms_nt"])
         shrink = final_rms_nt / max(after, 1e-12)
@@ -186,6 +189,26 @@ def _closest_beside(
             }
         )
     return out
+
+
+def _closest_alone(report: dict[str, Any]) -> list[dict[str, Any]]:
+    """The candidates not named that leave the least held-out residual fitted beside the
+    calibration alone (their single fits), and why each was refused."""
+    from orbitcal.diagnose.attribution.engine import CLOSEST_CANDIDATES
+
+    ranked = sorted(
+        (e for e in report["effects"] if not e["significant"]),
+        key=lambda e: (e.get("holdout_rms_after_nt") is None, e.get("holdout_rms_after_nt") or 0.0),
+    )
+    return [
+        {
+            "name": e["name"],
+            "holdout_rms_after_nt": e.get("holdout_rms_after_nt"),
+            "shrink": e.get("shrink"),
+            "refused_because": refusal(e),
+        }
+        for e in ranked[:CLOSEST_CANDIDATES]
+    ]
 
 
 def deciders(names: Sequence[str]) -> str:
@@ -229,15 +252,7 @@ def gap_section(
     excess = float(np.sqrt(max(rms**2 - sigma**2, 0.0))) if np.isfinite(sigma) else float("nan")
     where = (report.get("final") or {}).get("where") or report.get("where") or {}
     closest = (
-        _closest_beside(report, beside, rms_nt)
-        if beside is not None
-        else sorted(
-            (e for e in report["effects"] if not e["significant"]),
-            key=lambda e: (
-                e.get("holdout_rms_after_nt") is None,
-                e.get("holdout_rms_after_nt") or 0.0,
-            ),
-        )[:3]
+        _closest_beside(report, beside, rms_nt) if beside is not None else _closest_alone(report)
     )
     decide = [
         *dict.fromkeys(SEPARATING_DATA[e["name"]] for e in closest if e["name"] in SEPARATING_DATA),
@@ -255,15 +270,7 @@ def gap_section(
             "concentration": where.get("concentration"),
             "axis_rms_nt": where.get("axis_rms_nt"),
         },
-        "closest_candidates": [
-            {
-                "name": e["name"],
-                "holdout_rms_after_nt": e.get("holdout_rms_after_nt"),
-                "shrink": e.get("shrink"),
-                "refused_because": e["refused_because"] if "refused_because" in e else refusal(e),
-            }
-            for e in closest
-        ],
+        "closest_candidates": closest,
         "closest_judged_beside": [] if beside is None else list(beside[0]),
         "would_decide": decide,
         "inseparable": list(inseparable),

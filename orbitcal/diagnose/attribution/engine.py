@@ -461,9 +461,10 @@ def attribute(
     )
 
 
-#: The candidates of the selection's last step whose containment in the chosen effects' model
-#: is measured (:func:`_beside_final`): those the gap section may name as closest.
-BESIDE_CONTAINED = 3
+#: The closest candidates of the selection's last step (least held-out residual there) whose
+#: containment in the chosen effects' model is measured (:func:`_beside_final`): those the gap
+#: section names (:func:`orbitcal.diagnose.gap.gap_section`).
+CLOSEST_CANDIDATES = 3
 
 
 def _beside_final(
@@ -471,26 +472,19 @@ def _beside_final(
 ) -> dict[str, Any]:
     """:attr:`Attribution.beside_final` and ``beside_final_of`` from the selection's last step
     (:attr:`Stepwise.last_step`), when it was beside the effects finally chosen; for the
-    :data:`BESIDE_CONTAINED` candidates that leave the least held-out residual there, the share
-    of their single fit's field the chosen effects and the calibration could take up
-    (``contained``, :func:`contained_fraction`)."""
+    :data:`CLOSEST_CANDIDATES` that leave the least held-out residual there, the share of their
+    single fit's field the chosen effects take up beyond the calibration (``contained``,
+    :func:`contained_fraction`; None for the others)."""
     names = [c.name for c in chosen]
     if not names or sorted(stepwise.last_step_beside) != sorted(names):
         return {}
-    closest = sorted(stepwise.last_step, key=lambda n: stepwise.last_step[n][0].holdout_rms_nt)
+    step = stepwise.last_step
+    closest = sorted(step, key=lambda n: step[n]["holdout_rms_nt"])[:CLOSEST_CANDIDATES]
     blocks = [c.block for c in chosen]
-    out: dict[str, dict[str, Any]] = {}
-    for name, (cand, reason) in stepwise.last_step.items():
-        out[name] = {
-            "holdout_rms_nt": float(cand.holdout_rms_nt),
-            "p_value": float(cand.p_value),
-            "level": float(stepwise.last_step_level),
-            "gains": bool(cand.gains),
-            "implausible": reason,
-            "contained": None,
-        }
+    out = {name: {**v, "contained": None} for name, v in step.items()}
+    for name in closest:
         single = stepwise.single.get(name)
-        if name in closest[:BESIDE_CONTAINED] and single is not None and single.fit.blocks:
+        if single is not None and single.fit.blocks:
             f = single.fit.effect_nt(len(single.fit.blocks) - 1)
             out[name]["contained"] = contained_fraction(data, train, blocks, f)
     return {"beside_final": out, "beside_final_of": names}

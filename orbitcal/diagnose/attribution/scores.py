@@ -141,8 +141,10 @@ class Attribution:
         The candidates left out, each fitted beside the selected effects at the selection's
         last step: ``holdout_rms_nt`` (vector) and ``p_value`` of the held-out chunk test
         against the selected effects alone, the step's ``level``, whether it ``gains`` the
-        minimum shrink, and ``implausible`` (the reason, or None). Empty
-        when the selection's last step was not beside the effects finally selected.
+        minimum shrink, ``implausible`` (the reason, or None) and ``contained`` (for the
+        closest few, the share of their field the selected effects take up beyond the
+        calibration; else None). Empty when the selection's last step was not beside the
+        effects finally selected.
     beside_final_of : list of str
         The selected effects the candidates of ``beside_final`` were fitted beside.
     """

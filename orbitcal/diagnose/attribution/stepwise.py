@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 from orbitcal.arrays import FloatArray
 from orbitcal.diagnose.attribution.groups import GroupSelection
@@ -40,14 +41,14 @@ class Stepwise:
         The candidates indistinguishable from each selected one.
     dropped : list of str
         Names dropped by the backward step (they do not re-enter).
-    last_step : dict of str to (Candidate, str or None)
+    last_step : dict of str to dict
         The candidates of the latest forward step at which none passed, fitted beside the
-        effects then chosen (:attr:`last_step_beside`), each with its reason if implausible:
-        what came closest to explaining what the selection left.
+        effects then chosen (:attr:`last_step_beside`): what came closest to explaining what the
+        selection left. Numbers only (no residuals are held): ``holdout_rms_nt`` (vector),
+        ``p_value``, the step's ``level`` (Bonferroni over its candidates), ``gains`` and
+        ``implausible`` (the reason, or None).
     last_step_beside : list of str
         The effects chosen at that step.
-    last_step_level : float
-        The significance level of that step (Bonferroni over its candidates).
     """
 
     sel: GroupSelection
@@ -59,9 +60,8 @@ class Stepwise:
     chosen: list[Candidate] = field(default_factory=list)
     twins: dict[str, list[str]] = field(default_factory=dict)
     dropped: list[str] = field(default_factory=list)
-    last_step: dict[str, tuple[Candidate, str | None]] = field(default_factory=dict)
+    last_step: dict[str, dict[str, Any]] = field(default_factory=dict)
     last_step_beside: list[str] = field(default_factory=list)
-    last_step_level: float = float("nan")
 
     def run(self, rounds: int = 3) -> tuple[list[Candidate], dict[str, list[str]], list[str]]:
         """Forward steps, a swap pass, then backward elimination; again while the backward step
@@ -155,9 +155,15 @@ class Stepwise:
                 return cand, sel.implausible_reason(fixed, cand, level, rms, r)
 
             # each candidate fitted and judged alone (side by side on sel.workers threads)
-            step: dict[str, tuple[Candidate, str | None]] = {}
+            step: dict[str, dict[str, Any]] = {}
             for name, (cand, reason) in zip(remaining, sel.map(judged, remaining), strict=True):
-                step[name] = (cand, reason)
+                step[name] = {
+                    "holdout_rms_nt": float(cand.holdout_rms_nt),
+                    "p_value": float(cand.p_value),
+                    "level": float(level),
+                    "gains": bool(cand.gains),
+                    "implausible": reason,
+                }
                 tried.append(cand)
                 if reason is not None:
                     implausible[name] = reason
@@ -167,7 +173,6 @@ class Stepwise:
             new: list[Candidate]
             if not passing:
                 self.last_step, self.last_step_beside = step, [c.name for c in chosen]
-                self.last_step_level = level
             if passing:
                 best, tw = sel.pick(passing)
                 if tw:
