@@ -28,7 +28,7 @@ from orbitcal.geomag import dipole_axis_itrs, magnetic_latitude_deg
 #: the attribution that module's ``choose_options`` calls).
 ORBIT_S = 5400.0
 
-__all__ = ["FIELD_SCALE_NT", "ORBIT_S", "SECONDS_PER_DAY", "DiagnosisData"]
+__all__ = ["FIELD_SCALE_NT", "ORBIT_S", "SECONDS_PER_DAY", "DiagnosisData", "contiguous_runs"]
 
 
 #: Earth rotation rate about the ITRS z axis [rad/s] (IERS nominal).
@@ -41,7 +41,7 @@ FIELD_SCALE_NT = 5.0e4
 SECONDS_PER_DAY = 86400.0
 
 
-def _segments(t_s: FloatArray) -> list[slice]:
+def contiguous_runs(t_s: FloatArray) -> list[slice]:
     """Contiguous runs of samples (a gap longer than 3 median steps starts a new run)."""
     if t_s.size < 2:
         return [slice(0, t_s.size)]
@@ -55,7 +55,7 @@ def _segments(t_s: FloatArray) -> list[slice]:
 def _time_derivative(t_s: FloatArray, y: FloatArray) -> FloatArray:
     """d y / d t per contiguous segment (second-order central differences) [unit of y / s]."""
     out = np.zeros_like(y)
-    for seg in _segments(t_s):
+    for seg in contiguous_runs(t_s):
         n = seg.stop - seg.start
         if n >= 3:
             out[seg] = np.gradient(y[seg], t_s[seg], axis=0, edge_order=2)
@@ -250,7 +250,7 @@ class DiagnosisData:
         r = self.rot_itrs_to_body
         t = self.t_utc_s
         out = np.zeros((self.n, 3))
-        for seg in _segments(t):
+        for seg in contiguous_runs(t):
             idx = np.arange(seg.start, seg.stop)
             if idx.size < 2:
                 continue

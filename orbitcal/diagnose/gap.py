@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from orbitcal.arrays import BoolArray, FloatArray
+from orbitcal.diagnose.isolated import ISOLATED_SIGMAS, isolated_samples, without_isolated
 
 if TYPE_CHECKING:  # pragma: no cover
     from orbitcal.diagnose.effects import DiagnosisData
@@ -248,9 +249,18 @@ def gap_section(
     from orbitcal.diagnose.report import SEPARATING_DATA
 
     sigma, rms, times = noise_ratio(residual_nt, rms_nt, holdout)
+    where = (report.get("final") or {}).get("where") or report.get("where") or {}
+    isolated = isolated_samples(residual_nt, data.t_utc_s, sigma)
+    held_isolated = isolated & holdout
+    rms_all = rms
+    if np.any(held_isolated):
+        # The figures, and where the gap lies, without them (module isolated).
+        clean = holdout & ~isolated
+        rms = float(np.sqrt(np.mean(np.asarray(residual_nt)[clean] ** 2)))
+        times = rms / sigma
+        where = _where_without(data, residual_nt, isolated, holdout)
     unexplained = bool(np.isfinite(times) and times > GAP_TIMES_NOISE)
     excess = float(np.sqrt(max(rms**2 - sigma**2, 0.0))) if np.isfinite(sigma) else float("nan")
-    where = (report.get("final") or {}).get("where") or report.get("where") or {}
     closest = (
         _closest_beside(report, beside, rms_nt) if beside is not None else _closest_alone(report)
     )
@@ -274,6 +284,7 @@ def gap_section(
         "closest_judged_beside": [] if beside is None else list(beside[0]),
         "would_decide": decide,
         "inseparable": list(inseparable),
+        "isolated_samples": _isolated_entry(residual_nt, held_isolated, rms_all),
     }
     if inseparable:
         overshadowed = [e["name"] for e in report["effects"] if e.get("status") == "overshadowed"]
@@ -306,12 +317,59 @@ def gap_section(
                 [e for e in report["effects"] if e.get("status") == "unlit"],
                 stood_in=any(e.get("stands_in_for") for e in report["effects"]),
             )
+            + _isolated_clause(gap["isolated_samples"])
         )
     else:
         gap["statement"] = (
             f"the held-out residual is at the noise floor ({times:.2f} x {sigma:.3g} nT)"
+            + _isolated_clause(gap["isolated_samples"])
         )
     return gap
+
+
+def _where_without(
+    data: DiagnosisData, residual_nt: FloatArray, isolated: BoolArray, holdout: BoolArray
+) -> dict[str, Any]:
+    """Where the residual lies once its isolated samples are replaced by the running median
+    around them."""
+    from orbitcal.diagnose.where import where_analysis
+
+    r = without_isolated(residual_nt, data.t_utc_s, isolated)
+    return where_analysis(data, r, holdout=holdout)
+
+
+def _isolated_entry(
+    residual_nt: FloatArray, held_isolated: BoolArray, rms_all_nt: float
+) -> dict[str, Any] | None:
+    """The held-out isolated samples: how many, the largest component among them and the
+    held-out RMS per component with them [nT] (None when there are none)."""
+    k = int(np.count_nonzero(held_isolated))
+    if k == 0:
+        return None
+    largest = float(np.max(np.abs(np.asarray(residual_nt)[held_isolated])))
+    return {
+        "count": k,
+        "largest_component_nt": round(largest, 1),
+        "holdout_rms_with_them_nt": round(float(rms_all_nt), 4),
+        "left_out_because": "each differs from the median of the samples around it by more than "
+        f"{ISOLATED_SIGMAS:g} x the noise floor while its neighbours do not (a spike, a wrong "
+        "time tag, or a structure narrower than one sample step)",
+    }
+
+
+def _isolated_clause(entry: Mapping[str, Any] | None) -> str:
+    """The clause of a gap statement for the isolated samples left out of its figures."""
+    if not entry:
+        return ""
+    k = entry["count"]
+    return (
+        f"; {k} isolated held-out sample{'s' if k > 1 else ''} "
+        f"({'spikes: up to' if k > 1 else 'a spike:'} "
+        f"{entry['largest_component_nt']:.3g} nT in a component, far from both "
+        f"neighbours) {'are' if k > 1 else 'is'} left out of these figures: with "
+        f"{'them' if k > 1 else 'it'}, the held-out residual is "
+        f"{entry['holdout_rms_with_them_nt']:.3g} nT per component"
+    )
 
 
 def verdict_status(
