@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 from test_diagnose_worlds import make_world
 
 from orbitcal.diagnose.api import diagnose_data
-from orbitcal.diagnose.isolated import ISOLATED_SIGMAS, isolated_samples, without_isolated
+from orbitcal.diagnose.noise import ISOLATED_SIGMAS, isolated_samples, without_isolated
 
 
 def _noise(n: int, seed: int, sigma: float = 1.0) -> np.ndarray:

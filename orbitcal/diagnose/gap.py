@@ -14,7 +14,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from orbitcal.arrays import BoolArray, FloatArray
-from orbitcal.diagnose.isolated import ISOLATED_SIGMAS, isolated_samples, without_isolated
+from orbitcal.diagnose.noise import (
+    ISOLATED_SIGMAS,
+    isolated_samples,
+    noise_floor_nt,
+    without_isolated,
+)
 
 if TYPE_CHECKING:  # pragma: no cover
     from orbitcal.diagnose.effects import DiagnosisData
@@ -56,27 +61,6 @@ GENERAL_DECIDERS = (
     "a longer span (more orbits in the training and held-out blocks)",
     "other attitudes (body rates and orientations that move each axis through the field)",
 )
-
-
-def noise_floor_nt(residual_nt: FloatArray, mask: BoolArray | None = None) -> float:
-    """White-noise level of a residual per component [nT] from its second differences.
-
-    For white noise of standard deviation sigma, ``r[k+1] - 2 r[k] + r[k-1]`` has standard
-    deviation ``sqrt(6) sigma``; slow signals (an orbit-scale mismatch, a drift) cancel in it. The
-    median absolute value (``0.6745 sigma`` for a normal variable) keeps spikes and short auroral
-    structures from raising the estimate. Second differences across a gap are not used.
-    """
-    r = np.asarray(residual_nt, dtype=float)
-    idx = np.flatnonzero(mask) if mask is not None else np.arange(r.shape[0])
-    if idx.size < 8:
-        return float("nan")
-    consecutive = (np.diff(idx[:-1]) == 1) & (np.diff(idx[1:]) == 1)
-    d2 = r[idx[2:]] - 2.0 * r[idx[1:-1]] + r[idx[:-2]]
-    d2 = d2[consecutive]
-    if d2.shape[0] < 5:
-        return float("nan")
-    per_axis = np.median(np.abs(d2), axis=0) / 0.6745 / np.sqrt(6.0)
-    return float(np.sqrt(np.mean(per_axis**2)))
 
 
 def noise_ratio(
@@ -254,7 +238,7 @@ def gap_section(
     held_isolated = isolated & holdout
     rms_all = rms
     if np.any(held_isolated):
-        # The figures, and where the gap lies, without them (module isolated).
+        # The figures, and where the gap lies, without them (:mod:`orbitcal.diagnose.noise`).
         clean = holdout & ~isolated
         rms = float(np.sqrt(np.mean(np.asarray(residual_nt)[clean] ** 2)))
         times = rms / sigma

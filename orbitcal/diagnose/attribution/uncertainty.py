@@ -20,6 +20,7 @@ from orbitcal.diagnose.effects import (
     DiagnosisData,
     block_ranges,
 )
+from orbitcal.diagnose.noise import isolated_samples, noise_floor_nt, without_isolated
 
 #: Two-sided 90 % quantile of the standard normal distribution.
 Z90 = 1.6448536269514722
@@ -42,8 +43,7 @@ def _intervals(
     """
     if k >= len(fit.coef_cov):
         return {}
-    r = residual_nt[train]
-    infl = max(_autocorr_inflation(r[:, i]) for i in range(3))
+    infl = residual_inflation(residual_nt[train])
     sd = _sd(fit, k) * np.sqrt(infl)
     half = Z90 * sd
     if systematic is not None:
@@ -242,6 +242,21 @@ def _absorbed_fraction(
         return None
     proj = basis.project(f)
     return float(proj @ proj) / total
+
+
+def residual_inflation(residual_nt: FloatArray) -> float:
+    """Variance inflation of a mean for the correlated residual (N, 3) of consecutive samples:
+    the largest over the axes of :func:`_autocorr_inflation`, read with the residual's isolated
+    samples (spikes) replaced by the median around them. A few spikes of hundreds of nT make
+    every lag look uncorrelated (inflation 1) whatever the rest of the residual does: on the
+    independent generator's null world no. 33 the split fits' offsets then passed for 2-2.5
+    times more precise than they were (:mod:`orbitcal.diagnose.noise`)."""
+    r = np.asarray(residual_nt, dtype=float)
+    index = np.arange(r.shape[0], dtype=float)
+    spikes = isolated_samples(r, index, noise_floor_nt(r))
+    if np.any(spikes):
+        r = without_isolated(r, index, spikes)
+    return max(_autocorr_inflation(r[:, i]) for i in range(3))
 
 
 def _autocorr_inflation(r: FloatArray, max_lag: int = 200) -> float:

@@ -1,4 +1,7 @@
-"""Isolated samples of a residual: single samples far from both neighbours (spikes).
+"""The noise of a residual: its white-noise floor and its isolated samples (spikes).
+
+The floor (:func:`noise_floor_nt`) is read from second differences, which slow signals cancel
+in. An *isolated* sample is a single sample far from both neighbours.
 
 A telemetry spike, a sample whose time tag is wrong, or a field structure narrower than one
 sample step puts one sample of the residual far from the samples beside it. A few such samples
@@ -7,7 +10,9 @@ carry a held-out mean square on their own: on the independent generator's spiky 
 the noise floor, and the report said "an unexplained gap ... it lies mostly in eclipse" of
 data whose every other sample was at the noise floor (`benchmarks/results/diagnose_independent.md`).
 The gap section (:func:`orbitcal.diagnose.gap.gap_section`) leaves them out of its figures and
-says how many there were and how large.
+says how many there were and how large; the split fits
+(:mod:`orbitcal.diagnose.attribution.split_fits`) read the correlation of a residual without
+them.
 
 A sample is *isolated* when a component of it differs by more than :data:`ISOLATED_SIGMAS`
 white-noise standard deviations from the median of the five samples around it (the run of
@@ -24,7 +29,7 @@ from scipy.ndimage import median_filter
 from orbitcal.arrays import BoolArray, FloatArray
 from orbitcal.diagnose.data import contiguous_runs
 
-__all__ = ["ISOLATED_SIGMAS", "isolated_samples", "without_isolated"]
+__all__ = ["ISOLATED_SIGMAS", "isolated_samples", "noise_floor_nt", "without_isolated"]
 
 #: A component more than this many white-noise standard deviations from the running median of
 #: five samples marks its sample [-]. For white noise a sample's distance from that median has a
@@ -32,6 +37,27 @@ __all__ = ["ISOLATED_SIGMAS", "isolated_samples", "without_isolated"]
 ISOLATED_SIGMAS = 8.0
 #: Samples of the running median.
 _WINDOW = 5
+
+
+def noise_floor_nt(residual_nt: FloatArray, mask: BoolArray | None = None) -> float:
+    """White-noise level of a residual per component [nT] from its second differences.
+
+    For white noise of standard deviation sigma, ``r[k+1] - 2 r[k] + r[k-1]`` has standard
+    deviation ``sqrt(6) sigma``; slow signals (an orbit-scale mismatch, a drift) cancel in it. The
+    median absolute value (``0.6745 sigma`` for a normal variable) keeps spikes and short auroral
+    structures from raising the estimate. Second differences across a gap are not used.
+    """
+    r = np.asarray(residual_nt, dtype=float)
+    idx = np.flatnonzero(mask) if mask is not None else np.arange(r.shape[0])
+    if idx.size < 8:
+        return float("nan")
+    consecutive = (np.diff(idx[:-1]) == 1) & (np.diff(idx[1:]) == 1)
+    d2 = r[idx[2:]] - 2.0 * r[idx[1:-1]] + r[idx[:-2]]
+    d2 = d2[consecutive]
+    if d2.shape[0] < 5:
+        return float("nan")
+    per_axis = np.median(np.abs(d2), axis=0) / 0.6745 / np.sqrt(6.0)
+    return float(np.sqrt(np.mean(per_axis**2)))
 
 
 def _running_median(seg: FloatArray) -> FloatArray:
