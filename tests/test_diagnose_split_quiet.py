@@ -83,3 +83,24 @@ def test_a_disagreement_of_the_auroral_zones_names_nothing(
         assert found is not None and found.name == "sun_driven"
     else:
         assert found is None
+
+
+def test_the_inflation_of_a_correlated_residual_survives_its_spikes() -> None:
+    """An AR(1) residual (rho = 0.9 per sample: inflation about 19) with 0.5 % of its samples
+    hit by 300 nT spikes: the inflation is read as without them, not as about 1."""
+    from orbitcal.diagnose.attribution.uncertainty import _autocorr_inflation, residual_inflation
+
+    rng = np.random.default_rng(3)
+    n = 4000
+    e = rng.normal(size=(n, 3))
+    r = np.empty_like(e)
+    r[0] = e[0]
+    for k in range(1, n):
+        r[k] = 0.9 * r[k - 1] + e[k]
+    clean = residual_inflation(r)
+    assert 12.0 < clean < 26.0
+    spiky = r.copy()
+    hit = rng.random(n) < 0.005
+    spiky[hit] += rng.normal(scale=300.0, size=(int(hit.sum()), 3))
+    assert max(_autocorr_inflation(spiky[:, i]) for i in range(3)) < 2.0  # what it was
+    assert residual_inflation(spiky) == pytest.approx(clean, rel=0.1)
