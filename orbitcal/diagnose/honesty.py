@@ -83,6 +83,7 @@ from orbitcal.diagnose.gap import (
     noise_floor_nt,
     noise_ratio,
 )
+from orbitcal.diagnose.noise import despiked
 from orbitcal.diagnose.signed_rank import signed_rank_greater_p
 from orbitcal.diagnose.span_options import ORBIT_S
 from orbitcal.metrics import norm_rms_nt
@@ -817,6 +818,7 @@ def _weak_currents(
         return []
     others = [n for n in keep if n != name and n in fit_names]
     r = _refit(data, att, fit_names, others).residual_nt if others else att.baseline_residual_nt
+    r = despiked(r, data.t_utc_s)  # a spike is not a current (module noise)
     excess = math.sqrt(max(float(np.mean(r[hi] ** 2)) - float(np.mean(r[lo] ** 2)), 0.0))
     return [name] if excess < WEAK_CURRENTS_NT else []
 

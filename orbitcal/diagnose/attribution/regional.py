@@ -15,6 +15,7 @@ from orbitcal.diagnose.design import AURORAL_MLAT_DEG, QUIET_MLAT_DEG
 from orbitcal.diagnose.effects import (
     DiagnosisData,
 )
+from orbitcal.diagnose.noise import despiked
 from orbitcal.metrics import norm_rms_nt
 
 #: Chunk length [s] and folds of the regional test's cross-validation within auroral crossings.
@@ -44,6 +45,9 @@ def regional_fac(
     """
     if "field_aligned_currents" in selected:
         return None
+    # Spikes are not currents: 0.5 % of the samples hit by 300 nT made 3-8 nT sheets pass
+    # (independent world 13700 no. 33).
+    r_now = despiked(r_now, data.t_utc_s)
     amlat = np.abs(data.mlat_deg)
     hi = amlat > AURORAL_MLAT_DEG
     lo = amlat < QUIET_MLAT_DEG

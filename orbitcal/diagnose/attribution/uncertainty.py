@@ -20,7 +20,7 @@ from orbitcal.diagnose.effects import (
     DiagnosisData,
     block_ranges,
 )
-from orbitcal.diagnose.noise import isolated_samples, noise_floor_nt, without_isolated
+from orbitcal.diagnose.noise import despiked
 
 #: Two-sided 90 % quantile of the standard normal distribution.
 Z90 = 1.6448536269514722
@@ -251,11 +251,7 @@ def residual_inflation(residual_nt: FloatArray) -> float:
     every lag look uncorrelated (inflation 1) whatever the rest of the residual does: on the
     independent generator's null world no. 33 the split fits' offsets then passed for 2-2.5
     times more precise than they were (:mod:`orbitcal.diagnose.noise`)."""
-    r = np.asarray(residual_nt, dtype=float)
-    index = np.arange(r.shape[0], dtype=float)
-    spikes = isolated_samples(r, index, noise_floor_nt(r))
-    if np.any(spikes):
-        r = without_isolated(r, index, spikes)
+    r = despiked(residual_nt, np.arange(np.asarray(residual_nt).shape[0], dtype=float))
     return max(_autocorr_inflation(r[:, i]) for i in range(3))
 
 
