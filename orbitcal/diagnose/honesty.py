@@ -68,6 +68,7 @@ against the same held-out data, and says so where a claim does not hold:
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -209,9 +210,10 @@ def residue_test(
     full = fit.predict_nt(data)
     own = fit.effect_nt(k)
     y = data.b_raw_nt - (full - own)  # the joint model's residual without block k
-    kinds = imperfect_model(
-        data.t_utc_s, [fit.effect_nt(j) for j in range(len(fit.blocks)) if j != k]
-    )
+    others = [j for j in range(len(fit.blocks)) if j != k]
+    kinds = imperfect_model(data.t_utc_s, [fit.effect_nt(j) for j in others])
+    if any(fit.blocks[j].effect == "attitude_error" for j in others):
+        kinds += _rotation_wander(data, fit.blocks[k].variant)
     nuisance_axes = [
         np.column_stack([data.b_ref_body_nt, np.ones((data.n, 1)), *(x[:, i] for x in kinds)])
         for i in range(3)
@@ -228,6 +230,21 @@ def residue_test(
     rms0, rms1, p, gain = _held_out_gain(r_without, r_with, holdout)
     residue = not _beyond_residue(p, gain)
     return ResidueResult(name, rms0, rms1, float(p), residue)
+
+
+def _rotation_wander(data: DiagnosisData, variant: str) -> list[FloatArray]:
+    """Part of an imperfect model of an attitude error: a rotation of the attitude drifting
+    linearly over the span and, when the block under test steps at a time (a drift of the
+    parameters' ``step@T``), a rotation stepping then. Each as the fields of rotations about the
+    three body axes, ``f (e_k x B)``, (N, 3) each."""
+    t = data.t_utc_s
+    span = float(t[-1] - t[0]) or 1.0
+    shapes = [(t - t[0]) / span - 0.5]
+    m = re.search(r"step@(-?\d+(?:\.\d+)?)", variant)
+    if m is not None:
+        shapes.append((t >= float(m.group(1))).astype(float))
+    b = data.b_ref_body_nt
+    return [f[:, None] * np.cross(np.eye(3)[axis], b) for f in shapes for axis in range(3)]
 
 
 def _beyond_residue(p: float, gain: float) -> bool:
@@ -491,6 +508,8 @@ def review(data: DiagnosisData, att: Attribution) -> Review:
         fit = att.fits["final"]
         for k, name in enumerate(fit_names):
             residue_tested = FLEXIBLE | (SHORT_SPAN_FLEXIBLE if att.span_s < ORBIT_S else set())
+            if "attitude_error" in keep:
+                residue_tested = residue_tested | {"parameter_drift"}
             if name not in residue_tested or steps.get(name, 0) < 2 or name not in keep:
                 continue
             res = residue_test(data, fit, k, test_train, test_holdout, name=name)
