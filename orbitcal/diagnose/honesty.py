@@ -11,7 +11,10 @@ against the same held-out data, and says so where a claim does not hold:
   and a small shift in time (its time derivative), and the effect's own fitted field must still
   shrink the held-out residual significantly beside these (:func:`residue_test`). Real effects
   never have exactly the catalogue's shape; what the template of a real effect misses is
-  otherwise handed to the next flexible candidate and called significant.
+  otherwise handed to the next flexible candidate and called significant. Beside an attitude
+  error the imperfect model also holds a rotation drifting over the span and one stepping when
+  the tested effect steps (its random walk, which the template's sinusoids and held drift do not
+  follow), and a drift of the parameters is tested over whole orbits too (:func:`_rotation_wander`).
 * **Inseparable.** An effect at least :data:`INSEPARABLE_LIMIT` of whose fitted field is a change
   of the 12 calibration parameters on this span, and whose remaining part is smaller than what
   the final model leaves unexplained on the held-out blocks, cannot be told from the calibration:
