@@ -101,16 +101,16 @@ def test_a_drift_that_takes_up_the_walk_of_an_attitude_error_is_a_residue(monkey
     attitude error's imperfect model it explained the held-out blocks beyond a residue (18.8 ->
     13.6 nT, p = 0.0013); with it, it does not. Independent worlds 13200 no. 5 and 11, 13700 no. 12
     and 14, 13800 no. 19 named such a drift beside an attitude error."""
-    from orbitcal.diagnose import honesty
+    from orbitcal.diagnose import residue
 
     data, train, holdout, fit = _stepping_world(4)
-    assert honesty.residue_test(data, fit, 1, train, holdout).residue
-    monkeypatch.setattr(honesty, "_rotation_wander", lambda data, variant: [])
-    assert not honesty.residue_test(data, fit, 1, train, holdout).residue
+    assert residue.residue_test(data, fit, 1, train, holdout).residue
+    monkeypatch.setattr(residue, "rotation_wander", lambda data, variant: [])
+    assert not residue.residue_test(data, fit, 1, train, holdout).residue
 
 
 def test_a_real_offset_step_beside_a_wandering_attitude_error_is_no_residue() -> None:
-    from orbitcal.diagnose import honesty
+    from orbitcal.diagnose import residue
 
     data, train, holdout, fit = _stepping_world(4, offset_step_nt=25.0)
-    assert not honesty.residue_test(data, fit, 1, train, holdout).residue
+    assert not residue.residue_test(data, fit, 1, train, holdout).residue

@@ -16,12 +16,11 @@ from orbitcal.diagnose.effects import DesignBlock, DiagnosisData, get_effect
 from orbitcal.diagnose.gap import _lies
 from orbitcal.diagnose.honesty import (
     GAP_TIMES_NOISE,
-    _beyond_residue,
     noise_floor_nt,
-    residue_test,
     review,
 )
 from orbitcal.diagnose.honesty_report import _bound_limited
+from orbitcal.diagnose.residue import beyond_residue, residue_test
 from orbitcal.metrics import norm_rms_nt
 
 N = 3000
@@ -133,7 +132,7 @@ def test_a_material_share_significant_at_the_selections_level_is_not_a_residue(
 ) -> None:
     """A random walk no model forecasts leaves a real effect's chunk gains uneven; a share the
     imperfect model of the others cannot take is then still named."""
-    assert _beyond_residue(p, gain) is beyond
+    assert beyond_residue(p, gain) is beyond
 
 
 def test_a_final_model_worse_than_the_calibration_alone_falls_back() -> None:

@@ -111,7 +111,7 @@ def imperfect_model(t_s: FloatArray, fields: Sequence[FloatArray]) -> list[Float
     """An imperfect model of each fitted field ``f`` (N, 3): ``f``, ``tau * f`` (its scale
     drifting over the span, ``tau`` from -0.5 to 0.5) and ``df/dt`` (a shift in time), to be
     fitted per sensor axis -- the nuisance of the residue test
-    (:func:`orbitcal.diagnose.honesty.residue_test`) and of :func:`template_systematic`."""
+    (:func:`orbitcal.diagnose.residue.residue_test`) and of :func:`template_systematic`."""
     span = float(t_s[-1] - t_s[0]) or 1.0
     tau = ((t_s - t_s[0]) / span - 0.5)[:, None]
     out: list[FloatArray] = []
@@ -127,7 +127,7 @@ def template_systematic(
     """How far block ``k``'s parameters move when the other blocks' templates may be imperfect:
     refitted beside, per sensor axis, each other block's fitted field ``f_j``, ``tau * f_j`` (its
     scale drifting over the span) and ``df_j/dt`` (a shift in time) -- the imperfect model of the
-    residue test (:func:`orbitcal.diagnose.honesty.residue_test`). None beside no other block.
+    residue test (:func:`orbitcal.diagnose.residue.residue_test`). None beside no other block.
 
     The interval of a parameter holds only the noise's error; a template that misses part of
     another effect's shape moves it systematically. Measured small so far: on the independent
