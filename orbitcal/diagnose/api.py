@@ -255,14 +255,21 @@ def _attribute_reviewed(
     if not excluded:
         return att, rv
     again = attribute(data, options=options.attribution, fit_mask=fit_mask, excluded=excluded)
-    rv_again = review(data, again)
-    new = set(rv_again.keep) - set(rv.keep)
+    rv_again = review(data, again, excluded)
+    new = set(rv_again.keep) - set(rv.keep) - _named_by_rotation(rv_again)
     # The second look is for a candidate the stepwise selection passed over: an effect named by
     # its own regional test on what the second selection leaves is no such candidate
     # (independent world 11700 no. 4: auroral currents of nothing injected, named beside none).
     if not new or new & OWN_TEST:
         return att, rv
     return again, with_earlier(rv_again, rv, excluded, twin_of)
+
+
+def _named_by_rotation(rv: Review) -> set[str]:
+    """The attitude error when the review named it by its own test, not the selection."""
+    from orbitcal.diagnose.honesty import ATTITUDE
+
+    return {ATTITUDE} if rv.rotation is not None and rv.rotation.named else set()
 
 
 def _chosen_from_data(

@@ -296,7 +296,12 @@ def gap_section(
             f"{times:.1f} x the noise floor ({sigma:.3g} nT); "
             + _unmodelled((report.get("final") or {}).get("named_without_model") or [])
             + _lies(where.get("concentration"))
-            + _wandering([e["name"] for e in report["effects"] if e.get("status") == "wander"])
+            + _wandering(
+                [e["name"] for e in report["effects"] if e.get("status") == "wander"],
+                rotation=any(
+                    (e.get("rotation_test") or {}).get("named") for e in report["effects"]
+                ),
+            )
             + _fixed_in_space(
                 [e for e in report["effects"] if e.get("status") == "unlit"],
                 stood_in=any(e.get("stands_in_for") for e in report["effects"]),
@@ -496,12 +501,20 @@ def _fixed_in_space(unlit: Sequence[dict[str, Any]], *, stood_in: bool = False) 
     )
 
 
-def _wandering(names: Sequence[str]) -> str:
-    """The clause of a gap statement for candidates withdrawn as within the noise's wander."""
+def _wandering(names: Sequence[str], *, rotation: bool = False) -> str:
+    """The clause of a gap statement for candidates withdrawn as within the noise's wander
+    (``rotation``: the attitude error was named by the residual's shape, across B: the wander is
+    the attitude's, not an offset's, which would lie along B as much)."""
     if not names:
         return ""
+    like = (
+        "a random walk of the attitude would (across the main field, see the attitude error's "
+        "rotation_test)"
+        if rotation
+        else "a random-walk or 1/f offset of the sensor would (or a field no template draws)"
+    )
     return (
-        "; it wanders slowly, as a random-walk or 1/f offset of the sensor would (or a field "
-        f"no template draws), and {', '.join(names)} {'is' if len(names) == 1 else 'are'} no "
+        f"; it wanders slowly, as {like}, and {', '.join(names)} "
+        f"{'is' if len(names) == 1 else 'are'} no "
         "larger than that wander (the floor above is the white part of the noise only)"
     )

@@ -97,6 +97,7 @@ from orbitcal.diagnose.residue import (
     held_out_gain,
     residue_test,
 )
+from orbitcal.diagnose.rotation import RotationTest, rotation_test
 from orbitcal.diagnose.span_options import ORBIT_S
 from orbitcal.metrics import norm_rms_nt
 
@@ -349,10 +350,14 @@ class Review:
     verdict: str = "none"
     second_look: list[str] = field(default_factory=list)
     second_look_twins: dict[str, str] = field(default_factory=dict)
+    rotation: RotationTest | None = None
 
 
-def review(data: DiagnosisData, att: Attribution) -> Review:
-    """The residue tests and the fall-back of :func:`review_report`, without the report."""
+def review(data: DiagnosisData, att: Attribution, excluded: Sequence[str] = ()) -> Review:
+    """The residue tests and the fall-back of :func:`review_report`, without the report.
+
+    ``excluded``: effects the selection was run without (a second look): the attitude error's
+    own test (:mod:`orbitcal.diagnose.rotation`) does not name one of them."""
     fit_names = _fit_names(att)
     residues: list[dict[str, Any]] = []
     inseparable = inseparable_selected(data, att, fit_names)
@@ -474,6 +479,10 @@ def review(data: DiagnosisData, att: Attribution) -> Review:
         keep = []
     if not keep and final.rms_nt > att.baseline_rms_nt:
         final = _Final([], att.fits.get("baseline"), att.baseline_residual_nt, att.baseline_rms_nt)
+    rotation = _rotation(data, att, final, keep, excluded)
+    if rotation is not None and rotation.named:
+        keep.append(ATTITUDE)
+        blockless.append(ATTITUDE)
     unexplained = gap_times_noise(final, att.holdout) > GAP_TIMES_NOISE
     return Review(
         keep,
@@ -495,7 +504,30 @@ def review(data: DiagnosisData, att: Attribution) -> Review:
         quiet_rms_nt=quiet_rms_nt,
         gap_unexplained=unexplained,
         verdict=_verdict(keep),
+        rotation=rotation,
     )
+
+
+#: The effect named by :func:`orbitcal.diagnose.rotation.rotation_test`.
+ATTITUDE = "attitude_error"
+
+
+def _rotation(
+    data: DiagnosisData,
+    att: Attribution,
+    final: _Final,
+    keep: Sequence[str],
+    excluded: Sequence[str],
+) -> RotationTest | None:
+    """The attitude error's own test on what the final model leaves, when the selection never
+    chose it (an attitude error the review withdrew keeps the review's reason) and the final
+    held-out residual is an unexplained gap."""
+    if ATTITUDE in att.selected or ATTITUDE in keep or ATTITUDE in excluded:
+        return None
+    if not gap_times_noise(final, att.holdout) > GAP_TIMES_NOISE:
+        return None
+    alone = next((e for e in att.effects if e.name == ATTITUDE), None)
+    return rotation_test(data, final.residual_nt, att.holdout, alone)
 
 
 #: The effect that stands in for a Sun-driven field withdrawn as ``unlit`` (:func:`_stand_in`).

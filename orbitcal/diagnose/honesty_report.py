@@ -17,8 +17,9 @@ import numpy as np
 from orbitcal.diagnose.confounding import confounding_words
 from orbitcal.diagnose.effects import effect_param_range
 from orbitcal.diagnose.extrapolation import extrapolation_words
-from orbitcal.diagnose.gap import gap_section, verdict_status
+from orbitcal.diagnose.gap import deciders, gap_section, verdict_status
 from orbitcal.diagnose.honesty import (
+    ATTITUDE,
     CORRELATED_ALPHA,
     LARGE_GAP_TIMES_NOISE,
     MATERIAL_GAIN,
@@ -88,7 +89,12 @@ def review_report(
     changed = rv.keep != list(att.selected)
     if changed or rv.blockless:
         _final_section(report, data, att, rv)
-    if changed and rv.verdict != report["verdict"]:
+    if changed and rv.verdict != report["verdict"] and report["verdict"] == "none":
+        # named by its own test where the selection named nothing
+        report["verdict_status"] = "tentative"
+        report["verdict"] = rv.verdict
+        report["verdict_confidence"] = None
+    elif changed and rv.verdict != report["verdict"]:
         # the attribution's status spoke of the verdict withdrawn, not of this one
         report["verdict_status"] = (
             f"{rv.verdict} stands after the review withdrew {report['verdict']} (see each "
@@ -112,6 +118,14 @@ def review_report(
     absorbed = absorbed_candidates(att)
     report["gap"]["absorbed_by_calibration"] = absorbed
     verdict_status(report, absorbed, OWN_TEST)
+    if rv.rotation is not None and rv.rotation.named and report["verdict"] == ATTITUDE:
+        report["verdict_confidence"] = None
+        report["verdict_status"] = (
+            "tentative: attitude_error is "
+            + rv.rotation.words()
+            + "; what would decide: "
+            + deciders([ATTITUDE])
+        )
     extrapolation_words(report, data, att, own_test=OWN_TEST)
     confounding_words(
         report,
@@ -127,6 +141,8 @@ def review_report(
     return report
 
 
+#: The status of an attitude error named by :func:`orbitcal.diagnose.rotation.rotation_test`.
+ROTATION_STATUS = "named by its rotation test"
 #: The status of an effect the second selection left out as a withdrawn effect's twin.
 SECOND_LOOK_TWIN = "twin of a withdrawn effect"
 
@@ -220,13 +236,23 @@ def _mark_withdrawn(report: dict[str, Any], att: Attribution, rv: Review) -> Non
         "the independent stretches it spans (the chunks' autocorrelation), it is not "
         f"significant at {CORRELATED_ALPHA:g}",
     )
+    if rv.rotation is not None:
+        e = by_name[ATTITUDE]
+        e["rotation_test"] = rv.rotation.to_json()
+        if rv.rotation.named:
+            e["significant"] = True
+            e["status"] = ROTATION_STATUS
+            e["rotation_reason"] = rv.rotation.words()
     for name in rv.blockless:
         by_name[name]["model_left_out_reason"] = (
             _quiet_only_words(rv.quiet_rms_nt)
             if name in rv.quiet_only and rv.quiet_rms_nt is not None
             else (
-                "named by its own regional test, but its fitted model predicted the held-out "
-                "blocks worse than none: the final model leaves it out"
+                "named by the shape of the held-out residual (rotation_reason says why); its "
+                "model does not forecast the held-out blocks: the final model leaves it out"
+                if name == ATTITUDE and name not in rv.quiet_only
+                else "named by its own regional test, but its fitted model predicted the "
+                "held-out blocks worse than none: the final model leaves it out"
             )
         )
     for name, (variation, wander) in rv.wander.items():
@@ -313,6 +339,7 @@ def _honesty_section(rv: Review) -> dict[str, Any]:
         "fell_back": rv.fell_back,
         "withdrawn": rv.withdrawn,
         "named_without_model": list(rv.blockless),
+        "rotation_test": None if rv.rotation is None else rv.rotation.to_json(),
         "second_look": list(rv.second_look),
         "statement": _fall_back_words(rv),
         **({"second_look_statement": _second_look_words(rv)} if rv.second_look else {}),
