@@ -91,6 +91,12 @@ def test_a_rotation_the_training_blocks_do_not_show_is_not_named() -> None:
         rt = rotation_test(d, r, holdout, alone)
         assert rt is not None and not rt.named
     assert rotation_test(d, r, holdout, _alone(implausible="out of range")) is None
+    # beside a large other effect the attitude error alone may shrink nothing (a torquer of
+    # 100 nT): its test beside the effects kept then shows the rotation
+    rt = rotation_test(d, r, holdout, _alone(p_value=0.7, shrink=0.99), beside_p_value=0.003)
+    assert rt is not None and rt.named and "beside the effects kept" in rt.words()
+    rt = rotation_test(d, r, holdout, _alone(p_value=0.7, shrink=0.99), beside_p_value=0.3)
+    assert rt is not None and not rt.named
     assert rotation_test(d, r, holdout, None) is None
 
 
@@ -140,3 +146,4 @@ def test_through_the_diagnosis_a_wandering_attitude_error_is_named_without_a_mod
     assert "attitude_error" not in rep["final"]["effects"]
     assert rep["final"]["named_without_model"] == ["attitude_error"]
     assert rep["gap"]["unexplained"] and "attitude_error is named" in rep["gap"]["statement"]
+    assert "attitude_error" not in [c["name"] for c in rep["gap"]["closest_candidates"]]

@@ -138,7 +138,11 @@ def _closest_beside(
     by_name = {e["name"]: e for e in report["effects"]}
     words = ", ".join(kept)
     out = []
-    ranked = sorted(judged.items(), key=lambda kv: kv[1]["holdout_rms_nt"])
+    # An effect named without a model in the final fit (by its own test) was not refused.
+    ranked = sorted(
+        ((n, v) for n, v in judged.items() if not by_name.get(n, {}).get("significant")),
+        key=lambda kv: kv[1]["holdout_rms_nt"],
+    )
     for name, v in ranked[:CLOSEST_CANDIDATES]:
         e = by_name.get(name, {})
         after = float(v["holdout_rms_nt"])

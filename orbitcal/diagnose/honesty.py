@@ -479,7 +479,7 @@ def review(data: DiagnosisData, att: Attribution, excluded: Sequence[str] = ()) 
         keep = []
     if not keep and final.rms_nt > att.baseline_rms_nt:
         final = _Final([], att.fits.get("baseline"), att.baseline_residual_nt, att.baseline_rms_nt)
-    rotation = _rotation(data, att, final, keep, excluded)
+    rotation = _rotation(data, att, final, keep, excluded, wander)
     if rotation is not None and rotation.named:
         keep.append(ATTITUDE)
         blockless.append(ATTITUDE)
@@ -518,16 +518,25 @@ def _rotation(
     final: _Final,
     keep: Sequence[str],
     excluded: Sequence[str],
+    wander: Mapping[str, tuple[float, float]],
 ) -> RotationTest | None:
-    """The attitude error's own test on what the final model leaves, when the selection never
-    chose it (an attitude error the review withdrew keeps the review's reason) and the final
-    held-out residual is an unexplained gap."""
-    if ATTITUDE in att.selected or ATTITUDE in keep or ATTITUDE in excluded:
+    """The attitude error's own test on what the final model leaves, when the final held-out
+    residual is an unexplained gap and the selection never chose the attitude error, or the
+    review withdrew it as within the noise's wander: that test supposes a wandering offset,
+    which the shape of the residual can refute (an attitude error withdrawn for any other
+    reason keeps the review's reason). Its own model's held-out test is read beside the
+    calibration alone and, when the selection's last step fitted it beside the effects kept,
+    beside them (:func:`orbitcal.diagnose.rotation.rotation_test`)."""
+    if ATTITUDE in keep or ATTITUDE in excluded:
+        return None
+    if ATTITUDE in att.selected and ATTITUDE not in wander:
         return None
     if not gap_times_noise(final, att.holdout) > GAP_TIMES_NOISE:
         return None
     alone = next((e for e in att.effects if e.name == ATTITUDE), None)
-    return rotation_test(data, final.residual_nt, att.holdout, alone)
+    beside = att.beside_final.get(ATTITUDE) if sorted(keep) == sorted(att.beside_final_of) else None
+    beside_p = None if beside is None else float(beside["p_value"])
+    return rotation_test(data, final.residual_nt, att.holdout, alone, beside_p_value=beside_p)
 
 
 #: The effect that stands in for a Sun-driven field withdrawn as ``unlit`` (:func:`_stand_in`).

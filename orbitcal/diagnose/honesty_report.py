@@ -236,13 +236,6 @@ def _mark_withdrawn(report: dict[str, Any], att: Attribution, rv: Review) -> Non
         "the independent stretches it spans (the chunks' autocorrelation), it is not "
         f"significant at {CORRELATED_ALPHA:g}",
     )
-    if rv.rotation is not None:
-        e = by_name[ATTITUDE]
-        e["rotation_test"] = rv.rotation.to_json()
-        if rv.rotation.named:
-            e["significant"] = True
-            e["status"] = ROTATION_STATUS
-            e["rotation_reason"] = rv.rotation.words()
     for name in rv.blockless:
         by_name[name]["model_left_out_reason"] = (
             _quiet_only_words(rv.quiet_rms_nt)
@@ -284,6 +277,14 @@ def _mark_withdrawn(report: dict[str, Any], att: Attribution, rv: Review) -> Non
         "withdrawn_reason",
         "the final model with it was worse on the held-out blocks than the calibration alone",
     )
+    if rv.rotation is not None:
+        # after the wander test's withdrawal, which the rotation test may refute
+        e = by_name[ATTITUDE]
+        e["rotation_test"] = rv.rotation.to_json()
+        if rv.rotation.named:
+            e["significant"] = True
+            e["status"] = ROTATION_STATUS
+            e["rotation_reason"] = rv.rotation.words()
 
 
 def _final_section(
