@@ -535,8 +535,37 @@ def _rotation(
         return None
     alone = next((e for e in att.effects if e.name == ATTITUDE), None)
     beside = att.beside_final.get(ATTITUDE) if sorted(keep) == sorted(att.beside_final_of) else None
-    beside_p = None if beside is None else float(beside["p_value"])
-    return rotation_test(data, final.residual_nt, att.holdout, alone, beside_p_value=beside_p)
+    return rotation_test(
+        data,
+        final.residual_nt,
+        att.holdout,
+        alone,
+        beside_p_value=(
+            float(beside["p_value"]) if beside is not None else lambda: _beside_p(data, att, final)
+        ),
+    )
+
+
+def _beside_p(data: DiagnosisData, att: Attribution, final: _Final) -> float | None:
+    """The attitude error's held-out test beside the final model's effects: its design found
+    beside their blocks (its periods scanned on what they leave), fitted jointly with them; the
+    signed-rank p of the held-out chunks (:func:`orbitcal.diagnose.residue.held_out_gain`) the
+    fits use. None without effects in the final fit or without a design."""
+    from orbitcal.diagnose.attribution import fit_joint
+    from orbitcal.diagnose.effects import get_effect
+
+    if final.fit is None or not final.fit.blocks:
+        return None
+    blocks = list(final.fit.blocks)
+    block = get_effect(ATTITUDE).design_beside(data, att.train, blocks)
+    if block is None or not block.all_finite():
+        return None
+    with_it = fit_joint(data, att.train, [*blocks, block])
+    residual = data.b_raw_nt - with_it.predict_nt(data)
+    holdout = att.holdout & _fit_samples(data, att)  # as _still_significant judges
+    if int(holdout.sum()) < 4 * RESIDUE_CHUNKS:
+        holdout = att.holdout
+    return held_out_gain(final.residual_nt, residual, holdout)[2]
 
 
 #: The effect that stands in for a Sun-driven field withdrawn as ``unlit`` (:func:`_stand_in`).

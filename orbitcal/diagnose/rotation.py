@@ -30,6 +30,7 @@ no block in the final model: its model did not forecast the held-out blocks.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -159,11 +160,13 @@ def rotation_test(
     holdout: BoolArray,
     alone: EffectScore | None,
     *,
-    beside_p_value: float | None = None,
+    beside_p_value: float | Callable[[], float | None] | None = None,
 ) -> RotationTest | None:
     """The attitude error's own test on the final held-out residual ``residual_nt`` (N x 3,
     body axes [nT]); ``alone`` is the attitude error's score beside the calibration alone,
-    ``beside_p_value`` its held-out test beside the effects kept (None when not fitted there).
+    ``beside_p_value`` its held-out test beside the effects kept (None when not fitted there),
+    or a function that fits it there, called only when the shape holds and ``alone`` is not
+    significant.
 
     None when it cannot be asked: no such score (no design on this span), an implausible fit,
     fewer than :data:`ROTATION_MIN_SAMPLES` quiet held-out samples, or no noise floor.
@@ -189,10 +192,11 @@ def rotation_test(
     excess_along = max(along_rms**2 - sigma**2, 0.25 * sigma**2)
     ratio = excess_across / excess_along
     p = float(alone.p_value)
-    own = (alone.shrink > 1.0 and _significant(p)) or _significant(beside_p_value)
-    named = bool(
-        across_rms >= ROTATION_MIN_TIMES_NOISE * sigma and ratio >= ROTATION_EXCESS_RATIO and own
-    )
+    shape = bool(across_rms >= ROTATION_MIN_TIMES_NOISE * sigma and ratio >= ROTATION_EXCESS_RATIO)
+    own_alone = alone.shrink > 1.0 and _significant(p)
+    if callable(beside_p_value):
+        beside_p_value = beside_p_value() if shape and not own_alone else None
+    named = shape and (own_alone or _significant(beside_p_value))
     return RotationTest(
         n, across_rms, along_rms, float(sigma), ratio, alone.shrink, p, beside_p_value, named
     )
