@@ -147,3 +147,37 @@ def test_through_the_diagnosis_a_wandering_attitude_error_is_named_without_a_mod
     assert rep["final"]["named_without_model"] == ["attitude_error"]
     assert rep["gap"]["unexplained"] and "attitude_error is named" in rep["gap"]["statement"]
     assert "attitude_error" not in [c["name"] for c in rep["gap"]["closest_candidates"]]
+
+
+def test_when_the_review_asks_the_rotation_test() -> None:
+    """Only for an unexplained gap, and an attitude error the selection never chose or the
+    review withdrew as within the noise's wander (a wandering offset, which the shape refutes);
+    never for one a second look excluded, or one withdrawn for another reason."""
+    from types import SimpleNamespace
+
+    from orbitcal.diagnose.honesty import _Final, _rotation
+
+    d, holdout, rng = _world(7, "nadir")
+    r = np.cross(_walk(rng, d.n, 5e-4), d.b_ref_body_nt) + _noise(rng, d.n)
+    rms = float(np.sqrt(np.mean(np.sum(r[holdout] ** 2, axis=1))))
+    final = _Final([], None, r, rms)
+
+    def att(selected: list[str]) -> SimpleNamespace:
+        return SimpleNamespace(
+            selected=selected,
+            effects=[_alone()],
+            beside_final={},
+            beside_final_of=["x"],
+            holdout=holdout,
+        )
+
+    wander = {"attitude_error": (3.0, 1.0)}
+    rt = _rotation(d, att([]), final, [], (), {})  # type: ignore[arg-type]
+    assert rt is not None and rt.named
+    rt = _rotation(d, att(["attitude_error"]), final, [], (), wander)  # type: ignore[arg-type]
+    assert rt is not None and rt.named
+    assert _rotation(d, att(["attitude_error"]), final, [], (), {}) is None  # type: ignore[arg-type]
+    assert _rotation(d, att([]), final, [], ["attitude_error"], {}) is None  # type: ignore[arg-type]
+    assert _rotation(d, att([]), final, ["attitude_error"], (), {}) is None  # type: ignore[arg-type]
+    quiet = _Final([], None, _noise(rng, d.n), 1.0)
+    assert _rotation(d, att([]), quiet, [], (), {}) is None  # type: ignore[arg-type]
