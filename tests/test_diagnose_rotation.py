@@ -152,7 +152,8 @@ def test_through_the_diagnosis_a_wandering_attitude_error_is_named_without_a_mod
 def test_when_the_review_asks_the_rotation_test() -> None:
     """Only for an unexplained gap, and an attitude error the selection never chose or the
     review withdrew as within the noise's wander (a wandering offset, which the shape refutes);
-    never for one a second look excluded, or one withdrawn for another reason."""
+    never for one a second look excluded, one withdrawn for another reason, or beside a kept
+    time-tag error (a rotation too on a turning body)."""
     from types import SimpleNamespace
 
     from orbitcal.diagnose.honesty import _Final, _rotation
@@ -179,5 +180,6 @@ def test_when_the_review_asks_the_rotation_test() -> None:
     assert _rotation(d, att(["attitude_error"]), final, [], (), {}) is None  # type: ignore[arg-type]
     assert _rotation(d, att([]), final, [], ["attitude_error"], {}) is None  # type: ignore[arg-type]
     assert _rotation(d, att([]), final, ["attitude_error"], (), {}) is None  # type: ignore[arg-type]
+    assert _rotation(d, att([]), final, ["time_offset"], (), {}) is None  # type: ignore[arg-type]
     quiet = _Final([], None, _noise(rng, d.n), 1.0)
     assert _rotation(d, att([]), quiet, [], (), {}) is None  # type: ignore[arg-type]

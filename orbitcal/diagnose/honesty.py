@@ -510,6 +510,13 @@ def review(data: DiagnosisData, att: Attribution, excluded: Sequence[str] = ()) 
 
 #: The effect named by :func:`orbitcal.diagnose.rotation.rotation_test`.
 ATTITUDE = "attitude_error"
+#: Beside a kept time-tag error the rotation test is not asked: on a turning body (a tumble, or
+#: nadir pointing at the orbital rate) a time-tag error is a rotation of the field by the turn
+#: in dt, and what its model leaves is a rotation too. On fresh seeds 15000-15300 the test named
+#: an attitude error beside a kept time-tag error in 3 worlds without one (15000 no. 6, 15100
+#: no. 7, 15200 no. 8: 3.4-4.4 nT across B, the attitude error's model significant alone at
+#: p = 1e-4 to 2e-3 by taking part of that rotation), and in 1 with one (14700 no. 10).
+ROTATING_TWIN = "time_offset"
 
 
 def _rotation(
@@ -521,13 +528,14 @@ def _rotation(
     wander: Mapping[str, tuple[float, float]],
 ) -> RotationTest | None:
     """The attitude error's own test on what the final model leaves, when the final held-out
-    residual is an unexplained gap and the selection never chose the attitude error, or the
+    residual is an unexplained gap, no time-tag error is kept (:data:`ROTATING_TWIN`), and the
+    selection never chose the attitude error, or the
     review withdrew it as within the noise's wander: that test supposes a wandering offset,
     which the shape of the residual can refute (an attitude error withdrawn for any other
     reason keeps the review's reason). Its own model's held-out test is read beside the
     calibration alone and, when the selection's last step fitted it beside the effects kept,
     beside them (:func:`orbitcal.diagnose.rotation.rotation_test`)."""
-    if ATTITUDE in keep or ATTITUDE in excluded:
+    if ATTITUDE in keep or ATTITUDE in excluded or ROTATING_TWIN in keep:
         return None
     if ATTITUDE in att.selected and ATTITUDE not in wander:
         return None

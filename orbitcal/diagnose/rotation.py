@@ -24,7 +24,9 @@ are across B too) and without isolated samples:
   fitted beside the calibration alone or beside the effects kept: a rotation that the training
   blocks do show (beside a torquer of 100 nT, the attitude error alone shrinks nothing).
 
-An attitude error so named is reported significant, judged by this test (``rotation_test``), with
+Beside a kept time-tag error the test is not asked (a time-tag error on a turning body is a
+rotation too: :data:`orbitcal.diagnose.honesty.ROTATING_TWIN`). An attitude error so named is
+reported significant, judged by this test (``rotation_test``), with
 no block in the final model: its model did not forecast the held-out blocks.
 """
 
