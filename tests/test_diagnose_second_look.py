@@ -10,6 +10,7 @@ the excluded effects is kept in the second's (:func:`orbitcal.diagnose.honesty.w
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -170,7 +171,10 @@ def test_the_second_selection_is_kept_only_for_a_passed_over_candidate(
         calls.append(tuple(kw.get("excluded", ())))
         return first_att if len(calls) == 1 else second_att
 
-    def fake_review(data: object, att: _Att) -> Review:
+    reviewed_without: list[tuple[str, ...]] = []
+
+    def fake_review(data: object, att: _Att, excluded: Sequence[str] = ()) -> Review:
+        reviewed_without.append(tuple(excluded))
         if att is first_att:
             return _review(correlated=["time_offset"], gap_unexplained=True)
         return _review(keep=list(second_keep), gap_unexplained=False)
@@ -179,5 +183,7 @@ def test_the_second_selection_is_kept_only_for_a_passed_over_candidate(
     monkeypatch.setattr(honesty, "review", fake_review)
     att, rv = _attribute_reviewed(None, DiagnosisOptions(), None)  # type: ignore[arg-type]
     assert calls == [(), ("time_offset",)]
+    # the second review knows what its selection ran without (the rotation test names none)
+    assert reviewed_without == [(), ("time_offset",)]
     assert (att is second_att) is taken
     assert rv.second_look == (["time_offset"] if taken else [])
