@@ -65,7 +65,7 @@ ROTATION_MIN_TIMES_NOISE = 1.5
 #: Excess power across B over excess power along B at or above which the residual is a rotation
 #: [-]. On seeds 13400-13900 of the independent generator, worlds without an attitude error
 #: reached 7.4 at most (auroral currents' far field beside a crust), and 3.5 among the null
-#: worlds (1/f and random-walk offsets); the attitude errors the held-out test missed, 2.5-53.
+#: worlds (random-walk offsets); the attitude errors the held-out test missed, 2.5-53.
 #: The shape alone is not enough: on seeds 14600-14900 the far field of auroral currents beside
 #: an orbit error reached 14 at 2.1 x the noise (14800 no. 4, no attitude error), and the
 #: attitude error's own model refused it (p = 0.14 alone, 1.0 beside the effects kept).
