@@ -359,7 +359,6 @@ def review(data: DiagnosisData, att: Attribution, excluded: Sequence[str] = ()) 
     ``excluded``: effects the selection was run without (a second look): the attitude error's
     own test (:mod:`orbitcal.diagnose.rotation`) does not name one of them."""
     fit_names = _fit_names(att)
-    residues: list[dict[str, Any]] = []
     inseparable = inseparable_selected(data, att, fit_names)
     # A Sun-driven field without its one signature (no eclipse, shorter than an orbit) is a field
     # fixed in space: the span cannot name the Sun as its cause (fresh storm-pass draws named it
@@ -377,42 +376,8 @@ def review(data: DiagnosisData, att: Attribution, excluded: Sequence[str] = ()) 
         # nonlinearity at step 1, 72.5 nT held out alone against the external field's 22.9) must
         # then explain what an imperfect model of it cannot, as a later effect does.
         steps = {n: max(k, 2) for n, k in steps.items()} | {n: 1 for n in stood_in}
-    test_holdout, test_train = att.holdout, att.train
-    # Beside auroral currents the attribution already judged every other effect on quiet
-    # latitudes; over whole orbits the quiet held-out samples left are too few for a second test
-    # (on the compound benchmark, seed 192, it demoted four real effects of worlds with currents,
-    # none spurious; tests/test_diagnose_compound.py world 23 lost a Sun-driven field and a
-    # bias step). On a span shorter than an orbit (the real storm pass) the held-out blocks are
-    # one quiet stretch of track, and there flexible effects beside the currents took up the
-    # currents' far field (tumbling draws of benchmarks/independent/real_pass.py: 4 of 20).
-    currents = "field_aligned_currents" in att.selected
-    regress = [n for n in fit_names if n not in OWN_TEST]
-    if (
-        (not currents or att.span_s < ORBIT_S)
-        and fit_names
-        and len(regress) >= 2
-        and int(test_holdout.sum()) >= 4 * RESIDUE_CHUNKS
-    ):
-        fit = att.fits["final"]
-        for k, name in enumerate(fit_names):
-            residue_tested = FLEXIBLE | (SHORT_SPAN_FLEXIBLE if att.span_s < ORBIT_S else set())
-            if "attitude_error" in keep:
-                residue_tested = residue_tested | {"parameter_drift"}
-            if name not in residue_tested or steps.get(name, 0) < 2 or name not in keep:
-                continue
-            res = residue_test(data, fit, k, test_train, test_holdout, name=name)
-            residues.append(
-                {
-                    "effect": name,
-                    "holdout_rms_others_imperfect_nt": round(res.holdout_rms_others_nt, 4),
-                    "holdout_rms_with_nt": round(res.holdout_rms_with_nt, 4),
-                    "gain": round(res.gain, 4),
-                    "p_value": float(f"{res.p_value:.3g}"),
-                    "possible_residue": res.residue,
-                }
-            )
-            if res.residue:
-                keep.remove(name)
+    residues = _residue_tests(data, att, fit_names, keep, steps)
+    keep = [n for n in keep if n not in [r["effect"] for r in residues if r["possible_residue"]]]
     final = _Final(
         list(att.selected), att.fits.get("final"), att.final_residual_nt, att.final_rms_nt
     )
@@ -506,6 +471,57 @@ def review(data: DiagnosisData, att: Attribution, excluded: Sequence[str] = ()) 
         verdict=_verdict(keep),
         rotation=rotation,
     )
+
+
+def _residue_tests(
+    data: DiagnosisData,
+    att: Attribution,
+    fit_names: Sequence[str],
+    keep: Sequence[str],
+    steps: Mapping[str, int],
+) -> list[dict[str, Any]]:
+    """The residue test (:func:`orbitcal.diagnose.residue.residue_test`) of each flexible effect
+    kept that was selected after the first step: one entry per effect tested, with
+    ``possible_residue`` True for those the review withdraws."""
+    residues: list[dict[str, Any]] = []
+    keep = list(keep)
+    test_holdout, test_train = att.holdout, att.train
+    # Beside auroral currents the attribution already judged every other effect on quiet
+    # latitudes; over whole orbits the quiet held-out samples left are too few for a second test
+    # (on the compound benchmark, seed 192, it demoted four real effects of worlds with currents,
+    # none spurious; tests/test_diagnose_compound.py world 23 lost a Sun-driven field and a
+    # bias step). On a span shorter than an orbit (the real storm pass) the held-out blocks are
+    # one quiet stretch of track, and there flexible effects beside the currents took up the
+    # currents' far field (tumbling draws of benchmarks/independent/real_pass.py: 4 of 20).
+    currents = "field_aligned_currents" in att.selected
+    regress = [n for n in fit_names if n not in OWN_TEST]
+    if (
+        (not currents or att.span_s < ORBIT_S)
+        and fit_names
+        and len(regress) >= 2
+        and int(test_holdout.sum()) >= 4 * RESIDUE_CHUNKS
+    ):
+        fit = att.fits["final"]
+        for k, name in enumerate(fit_names):
+            residue_tested = FLEXIBLE | (SHORT_SPAN_FLEXIBLE if att.span_s < ORBIT_S else set())
+            if "attitude_error" in keep:
+                residue_tested = residue_tested | {"parameter_drift"}
+            if name not in residue_tested or steps.get(name, 0) < 2 or name not in keep:
+                continue
+            res = residue_test(data, fit, k, test_train, test_holdout, name=name)
+            residues.append(
+                {
+                    "effect": name,
+                    "holdout_rms_others_imperfect_nt": round(res.holdout_rms_others_nt, 4),
+                    "holdout_rms_with_nt": round(res.holdout_rms_with_nt, 4),
+                    "gain": round(res.gain, 4),
+                    "p_value": float(f"{res.p_value:.3g}"),
+                    "possible_residue": res.residue,
+                }
+            )
+            if res.residue:
+                keep.remove(name)
+    return residues
 
 
 #: The effect named by :func:`orbitcal.diagnose.rotation.rotation_test`.

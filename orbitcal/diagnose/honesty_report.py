@@ -90,8 +90,7 @@ def review_report(
     if changed or rv.blockless:
         _final_section(report, data, att, rv)
     if changed and rv.verdict != report["verdict"] and report["verdict"] == "none":
-        # named by its own test where the selection named nothing
-        report["verdict_status"] = "tentative"
+        # named by its own test where the selection named nothing (its status is set below)
         report["verdict"] = rv.verdict
         report["verdict_confidence"] = None
     elif changed and rv.verdict != report["verdict"]:
