@@ -200,7 +200,7 @@ class ExportOptions:
             if plain:
                 raise ExportError(
                     "--yamcs-inputs qualified: every raw and housekeeping name must be the "
-                    f"mission's qualified /SYSTEM/NAME; {', '.join(plain)} is not",
+                    f"mission's qualified /SYSTEM/NAME; not: {', '.join(plain)}",
                     field="yamcs_inputs",
                 )
 

@@ -128,7 +128,7 @@ def render_xtce(form: AffineForm | NetworkForm, info: ProductInfo, options: Expo
     if options.yamcs_inputs == "qualified" and plain:
         raise ExportError(
             "--yamcs-inputs qualified: every housekeeping input needs the mission's qualified "
-            f"name (--hk-names COLUMN=/SYSTEM/NAME); {', '.join(plain)} is not",
+            f"name (--hk-names COLUMN=/SYSTEM/NAME); not: {', '.join(plain)}",
             field="hk_names",
         )
     root = ET.Element(_T + "SpaceSystem", {"name": options.space_system})
