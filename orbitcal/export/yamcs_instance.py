@@ -9,8 +9,9 @@ Files:
   REST and in the web interface), a realtime processor, the MDB (the ``xtce``
   export, ``mdb/<SYSTEM>.xml``) and the streams, ``events_realtime`` among them (a JavaScript
   algorithm raises its events there);
-* ``etc/processor.yaml`` — the realtime processor: packets of ``tm_realtime`` (the mission
-  route, docs/yamcs.md), parameters of ``pp_realtime`` (``--yamcs-inputs telemetered``),
+* ``etc/processor.yaml`` — the processor types: ``realtime``, parameters of ``pp_realtime``
+  (``--yamcs-inputs telemetered``), and ``realtime-packets``, the same and the packets of
+  ``tm_realtime`` (the mission route, docs/yamcs.md);
   ``AlgorithmManager`` and ``LocalParameterManager`` (the local parameters set over REST),
   ``persistParameters`` from ``-Dorbitcal.yamcs.persist=`` (default false: the version rule
   gives the same answer either way, docs/yamcs.md);
@@ -74,8 +75,21 @@ streamConfig:
 """
 
 
-_PROCESSOR = """# orbitcal yamcs-instance: the realtime processor
+_PROCESSOR = """# orbitcal yamcs-instance: the processor types. realtime: parameters set over REST
+# and from pp_realtime; realtime-packets: the same and the packets of tm_realtime (the mission
+# route of orbitcal's docs/yamcs.md: its instance file names a root container for that stream).
 realtime:
+  services:
+    - class: org.yamcs.tctm.StreamParameterProvider
+      args:
+        stream: "pp_realtime"
+    - class: org.yamcs.algorithms.AlgorithmManager
+    - class: org.yamcs.parameter.LocalParameterManager
+  config: &config
+    subscribeAll: true
+    generateEvents: true
+    persistParameters: ${orbitcal.yamcs.persist:false}
+realtime-packets:
   services:
     - class: org.yamcs.StreamTmPacketProvider
       args:
@@ -85,10 +99,7 @@ realtime:
         stream: "pp_realtime"
     - class: org.yamcs.algorithms.AlgorithmManager
     - class: org.yamcs.parameter.LocalParameterManager
-  config:
-    subscribeAll: true
-    generateEvents: true
-    persistParameters: ${orbitcal.yamcs.persist:false}
+  config: *config
 """
 
 

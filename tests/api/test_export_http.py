@@ -106,7 +106,8 @@ def test_formats_over_http(served: Served) -> None:
     # issue 45: the ready Yamcs instance as a zip, its MDB the xtce answer
     instance = zipfile.ZipFile(io.BytesIO(answers["yamcs-instance"].content))
     assert sorted(instance.namelist()) == [
-        "README.md", "etc/processor.yaml", "etc/yamcs.magcal.yaml", "etc/yamcs.yaml", "mdb/MAGCAL.xml"
+        "README.md", "etc/processor.yaml", "etc/yamcs.magcal.yaml", "etc/yamcs.yaml",
+        "mdb/MAGCAL.xml",
     ]  # fmt: skip
     assert instance.read("mdb/MAGCAL.xml") == answers["xtce"].content
     assert answers["yamcs-instance"].headers["content-type"] == "application/zip"
