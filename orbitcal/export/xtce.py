@@ -3,17 +3,21 @@
 What it holds (namespace ``http://www.omg.org/spec/XTCE/20180204``, valid against the XTCE 1.2
 schema, ``tests/authorities/xtce/``):
 
-* the raw axes [nT] and housekeeping inputs, unless given as qualified references
+* the raw axes [nT] and housekeeping inputs as local parameters (settable over REST) or
+  telemetered ones (``options.yamcs_inputs``), unless given as qualified references
   (``/MYSAT/MAG_X``) to parameters the mission's MDB already defines;
 * the calibrated axes [nT] (``dataSource="derived"``), outputs of a JavaScript
   ``CustomAlgorithm`` that carries the **whole** calibration (the network too, for LM-BP);
 * every coefficient as a local parameter (``dataSource="local"``, ``initialValue`` = this
-  version), so ``yamcs-push`` (``POST .../parameters:batchSet``) installs a new version of the
-  same layout without an MDB reload; ``<SYS>_VERSION``, ``<SYS>_SHA256`` and ``<SYS>_LAYOUT``
-  say which version is loaded;
+  version, ``persistence="false"``: after a restart the file's version, :data:`VERSION_RULE`),
+  so ``yamcs-push`` (``POST .../parameters:batchSet``) installs a new version of the same layout
+  without an MDB reload until the next restart; ``<SYS>_VERSION``, ``<SYS>_SHA256`` and
+  ``<SYS>_LAYOUT`` say which version is served;
 * one strict-XTCE ``MathAlgorithm`` per axis with the affine part in postfix
-  (``<CAL>_LIN``): exact for the affine methods, the network's affine part otherwise (the header
-  says what it drops).
+  (``<CAL>_LIN``): exact for the affine methods, the network's affine part otherwise (its
+  description and the header say what it drops). It runs when the JavaScript algorithm has
+  computed the same row: Yamcs feeds a MathAlgorithm a missing input as 0, the JavaScript
+  algorithm waits for every input (``Yamcs:AlgorithmMandatoryInput``).
 
 Yamcs cannot do this with calibrators: a calibrator sees one parameter (its XTCE reader refuses
 other parameters inside one), so cross-axis terms need an algorithm.
