@@ -205,6 +205,7 @@ def test_every_export_loads_and_computes_apply(yamcs_suite: Any) -> None:
             }
         )
         assert d_cal < YAMCS_NT and d_lin < YAMCS_NT, (m, n, d_cal, d_lin)
+    TABLE.append({"suite: Yamcs start [s]": [round(t, 1) for t in server.start_s]})
     for m, n in cells:
         status = proc.algorithm_status(f"/{system_name(m, n)}/MagCalibration")
         assert status.get("errorCount", 0) == 0 and int(status["runCount"]) >= len(rows) - 1
@@ -252,52 +253,93 @@ def test_push_installs_a_new_version_in_the_running_server(yamcs_suite: Any) -> 
         assert len(said) == 1 and "version 2" in said[0] and "holds version 1" in said[0]
 
 
-@pytest.mark.slow  # three starts of a second server (~10 s each on a loaded machine)
+def _restart_folder(folder: Path, v1: dict[str, Any], method: str) -> None:
+    """A second server: instance ``keep`` (``persistParameters: true``) and ``drop`` (false),
+    both loading the same calibration MDB file."""
+    write_suite_folder(folder, {m: v1 for m in METHODS}, [(method, "default")], instance="keep")
+    etc = folder / "etc"
+    keep = (etc / "yamcs.keep.yaml").read_text()
+    assert "type: realtime-packets" in keep
+    (etc / "yamcs.keep.yaml").write_text(keep.replace("type: realtime-packets", "type: keep"))
+    links = keep.index("dataLinks:"), keep.index("mdb:")
+    drop = keep[: links[0]] + keep[links[1] :]  # one UDP link
+    (etc / "yamcs.drop.yaml").write_text(drop)
+    # the control: persisting, with the file of issue 45 (coefficients persistence="true")
+    sys_ = system_name(method, "default")
+    teeth = drop.replace(f"mdb/{sys_}.xml", "mdb/TEETH.xml")
+    (etc / "yamcs.teeth.yaml").write_text(teeth.replace("type: realtime-packets", "type: keep"))
+    processor = (etc / "processor.yaml").read_text()
+    persisting = processor[processor.index("realtime-packets:") :].replace(
+        "realtime-packets:", "keep:"
+    )
+    persisting = persisting.replace("config: *config", "config:\n    persistParameters: true")
+    (etc / "processor.yaml").write_text(processor + persisting)
+    server = (etc / "yamcs.yaml").read_text()
+    (etc / "yamcs.yaml").write_text(server.replace("  - keep\n", "  - keep\n  - drop\n  - teeth\n"))
+
+
+def _write_mdb(folder: Path, doc: dict[str, Any], method: str) -> None:
+    """The calibration MDB, and the control's copy with persistent coefficients."""
+    sys_ = system_name(method, "default")
+    opts = export_options(method, "default", calibration_form(doc).hk_names)
+    xml = export(doc, opts).content or b""
+    (folder / "mdb" / f"{sys_}.xml").write_bytes(xml)
+    (folder / "mdb" / "TEETH.xml").write_bytes(xml.replace(b'persistence="false"', b""))
+
+
+@pytest.mark.slow  # three starts of a second server (15-35 s each on a loaded machine)
 def test_a_restart_serves_the_files_version_with_and_without_persistence(
     yamcs_fitted: dict[str, Any], tmp_path: Path
 ) -> None:
     """The version rule (docs/yamcs.md): a push lasts until a restart; a restart with a newer file
-    serves that file's coefficients; the same with ``persistParameters`` true and false."""
+    serves that file's coefficients; the same with ``persistParameters`` true (instance ``keep``)
+    and false (``drop``)."""
     method = "lmbp-hk"
     f = yamcs_fitted[method]
     v1, v2 = f.document, _version2(f.document)
-    for persist in (True, False):
-        folder = tmp_path / f"persist-{persist}"
-        folder.mkdir()
-        cells = [(method, "default")]
-        write_suite_folder(folder, {m: v1 for m in METHODS}, cells, instance="restart")
-        server = YamcsServer(folder, persist=persist)
-        sys_ = system_name(method, "default")
-        mdb = folder / "mdb" / f"{sys_}.xml"
-        try:
-            server.start(["restart"])
-            target = YamcsTarget(url=server.url, instance="restart")
+    _restart_folder(tmp_path, v1, method)
+    _write_mdb(tmp_path, v1, method)
+    server = YamcsServer(tmp_path)
+    sys_ = system_name(method, "default")
+    version_name = f"/{sys_}/{sys_}_VERSION"
+    instances = {"keep": "true", "drop": "false"}
+    try:
+        server.start([*instances, "teeth"])
+        for instance in [*instances, "teeth"]:
+            target = YamcsTarget(url=server.url, instance=instance)
             export(v2, ExportOptions(format="yamcs-push", yamcs=target, space_system=sys_))
-            proc = server.processor("restart")
-            proc.wait_for({f"/{sys_}/{sys_}_VERSION": 2}, [])
-            server.stop()
-            for file_doc, phase in ((v1, "restart, same v1 file"), (v2, "restart, v2 file")):
-                opts = export_options(method, "default", calibration_form(v1).hk_names)
-                mdb.write_bytes(export(file_doc, opts).content or b"")
-                server.start(["restart"])
-                proc = server.processor("restart")
-                version = proc.values([f"/{sys_}/{sys_}_VERSION"])[f"/{sys_}/{sys_}_VERSION"]
+            server.processor(instance).wait_for({version_name: 2}, [])
+        server.stop()
+        for file_doc, phase in ((v1, "restart, same v1 file"), (v2, "restart, v2 file")):
+            _write_mdb(tmp_path, file_doc, method)
+            server.start([*instances, "teeth"])
+            # the control: persistent coefficients outlive the file (issue 45's point 4), so
+            # persistParameters is on where the test says it is
+            teeth = server.processor("teeth").values([version_name])[version_name]
+            assert teeth == 2, teeth
+            TABLE.append({"control (persistence=true, persistParameters true)": phase,
+                          "version_served": teeth})  # fmt: skip
+            for instance, persist in instances.items():
+                proc = server.processor(instance)
+                version = proc.values([version_name])[version_name]
                 rows = np.flatnonzero(f.holdout)[10:13]
-                feeder = Feeder(server, "restart", {m: f for m in METHODS})
-                diffs = _replay(feeder, cells, {method: file_doc}, rows, 0.25)
+                feeder = Feeder(server, instance, {m: f for m in METHODS})
+                diffs = _replay(feeder, [(method, "default")], {method: file_doc}, rows, 0.25)
                 d_cal, d_lin = diffs[(method, "default")]
                 said = [e["message"] for e in proc.events() if "computing with" in e["message"]]
                 TABLE.append(
                     {"method": method, "names": "default", "inputs": "local (REST)",
-                     "phase": f"{phase} (persistParameters {str(persist).lower()})",
+                     "phase": f"{phase} (persistParameters {persist})",
                      "loaded": True, "version_served": version, "cal_vs_apply_nt": d_cal,
                      "lin_vs_affine_nt": d_lin, "events": said}
                 )  # fmt: skip
-                assert version == file_doc["version"]
+                assert version == file_doc["version"], (instance, phase)
                 assert d_cal < YAMCS_NT and d_lin < YAMCS_NT
-                server.stop()
-        finally:
+                assert said == [], said  # the file's own version: nothing to say
             server.stop()
+    finally:
+        server.stop()
+    TABLE.append({"restart test: Yamcs starts [s]": [round(t, 1) for t in server.start_s]})
 
 
 @pytest.fixture(scope="module", autouse=True)
