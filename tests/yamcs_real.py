@@ -15,7 +15,7 @@ import shutil
 import socket
 import subprocess
 import time
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -182,10 +182,7 @@ class Processor:
         return {n: _eng(pv) for n, pv in self.get(names).items()}
 
     def wait_for(
-        self,
-        expected: dict[str, float],
-        also: list[str],
-        outputs: list[str] = (),  # type: ignore[assignment]
+        self, expected: dict[str, float], also: list[str], outputs: Sequence[str] = ()
     ) -> dict[str, dict[str, Any]]:
         """Poll until every name of ``expected`` holds its value and every name of ``outputs``
         has a value acquired at or after it; return those and ``also``."""
