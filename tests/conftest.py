@@ -112,3 +112,35 @@ def swarm_a_temperature_world() -> tuple[Any, Any]:
     from shared_worlds import swarm_a_temperature_world as build
 
     return build()
+
+
+# --- a real Yamcs 5.12.8 (issue 45; tests marked ``yamcs``) -------------------------------------
+
+
+@pytest.fixture(scope="session")
+def yamcs_fitted(swarm_a_temperature_world: Any) -> dict[str, Any]:
+    """The four methods the Yamcs exports are checked with, fitted on the shared world."""
+    from export_worlds import fitted
+    from yamcs_real import METHODS
+
+    return {m: fitted(swarm_a_temperature_world, m) for m in METHODS}
+
+
+@pytest.fixture(scope="session")
+def yamcs_suite(yamcs_fitted: dict[str, Any], tmp_path_factory: pytest.TempPathFactory) -> Any:
+    """One Yamcs 5.12.8 for the session: instance ``suite`` with docs/yamcs.md's mission MDB and
+    one calibration MDB per method × names (and one with telemetered inputs); stopped at the end.
+    Yields ``(server, {cell: mdb file}, fitted)``."""
+    from yamcs_real import METHODS, YamcsServer, write_suite_folder
+
+    folder = tmp_path_factory.mktemp("yamcs-suite")
+    cells = [(m, n) for m in METHODS for n in ("default", "custom", "qualified")]
+    cells.append(("linear-hk", "telemetered"))
+    documents = {m: f.document for m, f in yamcs_fitted.items()}
+    files = write_suite_folder(folder, documents, cells)
+    server = YamcsServer(folder)
+    try:
+        server.start(["suite"])
+        yield server, files, yamcs_fitted
+    finally:
+        server.stop()

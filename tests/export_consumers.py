@@ -80,12 +80,16 @@ def xtce_values(
     hk_names: list[str],
     x_hk: np.ndarray | None,
 ) -> dict[str, Any]:
-    """Parameter name -> value: the telemetry for raw/hk (arrays), ``initialValue`` for locals."""
+    """Parameter name -> value: the telemetry for raw/hk (arrays), ``initialValue`` for the
+    local parameters that have one (the coefficients; local inputs have none)."""
     values: dict[str, Any] = {}
+    inputs = {*raw_names, *hk_names}
     for p in root.iterfind(".//x:ParameterSet/x:Parameter", NS):
         props = p.find("x:ParameterProperties", NS)
         if props is not None and props.get("dataSource") == "local":
             init = p.get("initialValue")
+            if p.get("name") in inputs:
+                continue
             assert init is not None, p.get("name")
             try:
                 values[p.get("name", "")] = float(init)
@@ -112,9 +116,13 @@ def run_yamcs_javascript(root: ET.Element, values: dict[str, Any], n: int) -> np
         for e in algo.iterfind(".//x:InputParameterInstanceRef", NS)
     ]
     outs = [e.get("outputName") for e in algo.iterfind(".//x:OutputParameterRef", NS)]
+
+    def one(v: Any) -> Any:  # None: no value yet (Yamcs binds the input with a null value)
+        return None if v is None else float(v)
+
     rows = [
         [
-            float(values[ref][i]) if isinstance(values[ref], np.ndarray) else values[ref]
+            one(values[ref][i]) if isinstance(values[ref], np.ndarray) else values[ref]
             for ref, _ in refs
         ]
         for i in range(n)

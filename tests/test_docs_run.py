@@ -274,3 +274,154 @@ def test_service_settings_table_lists_every_setting_with_its_default() -> None:
         if hasattr(default, "get_secret_value"):
             default = default.get_secret_value()
         assert _same(table[env], default), (env, table[env], default)
+
+
+# --- docs/yamcs.md: the operator's recipe against a real Yamcs 5.12.8 (issue 45) ---------------
+
+
+def _yamcs_calibrations(tmp: Path) -> tuple[dict[str, Any], dict[str, Any]]:
+    """``/tmp/cal.json`` (lmbp-hk on the shared world), ``/tmp/cal-v2.json`` (its next version)."""
+    sys.path.insert(0, str(ROOT / "tests"))
+    from export_worlds import fitted
+    from shared_worlds import swarm_a_temperature_world
+
+    doc = fitted(swarm_a_temperature_world(), "lmbp-hk").document
+    doc2 = json.loads(json.dumps(doc))
+    doc2["version"] = 2
+    doc2["model"]["weights"]["b2"] = [v + 0.01 for v in doc2["model"]["weights"]["b2"]]
+    (tmp / "cal.json").write_text(json.dumps(doc))
+    (tmp / "cal-v2.json").write_text(json.dumps(doc2))
+    return doc, doc2
+
+
+def _run_until(script: str, env: dict[str, str], done: Any, what: str) -> str:
+    """Run a bash block until ``done(stdout)`` (Yamcs processes a set asynchronously: an
+    operator reads again), at most 60 s."""
+    import time
+
+    t0 = time.monotonic()
+    while True:
+        proc = subprocess.run(
+            ["bash", "-euo", "pipefail", "-c", script], env=env, capture_output=True, text=True,
+            timeout=300,
+        )  # fmt: skip
+        assert proc.returncode == 0, (what, proc.stdout[-2000:], proc.stderr[-2000:])
+        if done(proc.stdout):
+            return proc.stdout
+        assert time.monotonic() - t0 < 60, (what, proc.stdout[-3000:])
+        time.sleep(0.2)
+
+
+def _batch_values(text: str) -> dict[str, Any]:
+    """name → engineering value of the batchGet answers in ``text`` (last answer wins)."""
+    out: dict[str, Any] = {}
+    decoder = json.JSONDecoder()
+    i = 0
+    while (i := text.find("{", i)) >= 0:
+        try:
+            obj, end = decoder.raw_decode(text, i)
+        except ValueError:
+            i += 1
+            continue
+        for pv in obj.get("value", []) if isinstance(obj, dict) else []:
+            eng = pv.get("engValue", {})
+            out[pv["id"]["name"]] = next(v for k, v in eng.items() if k != "type")
+        i = end
+    return out
+
+
+@pytest.mark.yamcs
+@pytest.mark.slow  # two starts of Yamcs, an export and a push: ~40 s on this machine
+def test_yamcs_doc_runs(tmp_path: Path) -> None:
+    import numpy as np
+
+    sys.path.insert(0, str(ROOT / "tests"))
+    from yamcs_real import YamcsServer, free_port
+
+    from orbitcal.export import evaluate_document
+
+    doc, doc2 = _yamcs_calibrations(tmp_path)
+    text = (ROOT / "docs" / "yamcs.md").read_text()
+    port, udp = free_port(), free_port()
+    bash = [
+        _in(tmp_path, b).replace("8090", str(port)).replace("10015", str(udp))
+        for b in blocks(ROOT / "docs" / "yamcs.md", "bash")
+    ]
+    assert len(bash) == 7, len(bash)
+    env = {k: v for k, v in os.environ.items() if not k.startswith("ORBITCAL_")}
+    env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
+    env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env['PATH']}"
+    raw2, hk = [21001.5, -4001.25, 30501.0], [[21.5, 2.0, -1.5, 0.5, 3.0]]
+    want = evaluate_document(doc, np.array([raw2]), np.array(hk))[0]
+    want2 = evaluate_document(doc2, np.array([[21002.5, -4001.25, 30501.0]]), np.array(hk))[0]
+    cal = ["/MAGCAL/MAG_X_CAL", "/MAGCAL/MAG_Y_CAL", "/MAGCAL/MAG_Z_CAL"]
+
+    def start(line: str, instance: str) -> Any:
+        """The documented start line, run in the background with the test's port."""
+        assert line.endswith("&") and "org.yamcs.YamcsServer --etc-dir etc" in line
+        folder = Path(line.split("&&")[0].removeprefix("cd ").strip())
+        server = YamcsServer(folder)
+        server.port, server.udp_port, server.url = port, udp, f"http://127.0.0.1:{port}"
+        command = line.rstrip("&").replace(
+            "java ", f"java -Dorbitcal.yamcs.port={port} -Dorbitcal.yamcs.udp={udp} ", 1
+        )
+        server.command = lambda: ["bash", "-c", f"exec {command.split('&&', 1)[1].strip()}"]  # type: ignore[method-assign]
+        return server.start([instance])
+
+    # 1. a ready instance
+    export_line, start_line = commands(bash[0])
+    out = subprocess.run(
+        export_line, shell=True, env=env, capture_output=True, text=True, timeout=300
+    )
+    assert out.returncode == 0, out.stderr
+    server = start(start_line, "magcal")
+    try:
+        status = _run_until(bash[1], env, lambda s: "errorCount" in s, "raw before housekeeping")
+        answer = json.loads(status[status.rindex("{\n") :])  # the status, after the set's "{}"
+        assert answer.get("errorCount", 0) == 0 and int(answer.get("runCount", 0)) == 0, answer
+        got = _run_until(
+            bash[2], env, lambda s: _batch_values(s).get("/MAGCAL/MAG_X_CAL") is not None
+            and abs(_batch_values(s)["/MAGCAL/MAG_X_CAL"] - want[0]) < 1e-9, "replayed row",
+        )  # fmt: skip
+        values = _batch_values(got)
+        assert np.max(np.abs(np.array([values[c] for c in cal]) - want)) < 1e-9
+        assert values["/MAGCAL/MAGCAL_VERSION"] == 1
+        # 2. a push of version 2
+        pushed = _run_until(bash[3], env, lambda s: True, "push")
+        n = re.search(r"set (\d+) parameters on http://127\.0\.0\.1:\d+ \(magcal/realtime\); "
+                      r"previous version 1", pushed)  # fmt: skip
+        assert n is not None, pushed
+        assert f"set {n.group(1)} parameters on http://127.0.0.1:8090" in text
+        after = _run_until(
+            bash[4], env, lambda s: "computing with coefficients of version 2" in s
+            and _batch_values(s).get("/MAGCAL/MAGCAL_VERSION") == 2
+            and abs(_batch_values(s)["/MAGCAL/MAG_X_CAL"] - want2[0]) < 1e-9, "after the push",
+        )  # fmt: skip
+        values = _batch_values(after)
+        assert np.max(np.abs(np.array([values[c] for c in cal]) - want2)) < 1e-9
+        assert "holds version 1, which every restart serves again" in after
+    finally:
+        server.stop()
+
+    # 3. the mission route: export, the mission MDB and the instance file, packets over UDP
+    (mission_export,) = commands(bash[5])
+    out = subprocess.run(
+        mission_export, shell=True, env=env, capture_output=True, text=True, timeout=300
+    )
+    assert out.returncode == 0, out.stderr
+    mission = tmp_path / "mission"
+    (mission / "mdb" / "MYSAT.xml").write_text(blocks(ROOT / "docs" / "yamcs.md", "xml")[0])
+    (yaml_block,) = blocks(ROOT / "docs" / "yamcs.md", "yaml")
+    (mission / "etc" / "yamcs.mysat.yaml").write_text(yaml_block.replace("10015", str(udp)))
+    server = start(start_line.replace(str(tmp_path / "magcal-yamcs"), str(mission)), "mysat")
+    try:
+        (code,) = blocks(ROOT / "docs" / "yamcs.md", "python")
+        exec(compile(code.replace("10015", str(udp)), "docs/yamcs.md[udp]", "exec"), {})
+        got = _run_until(
+            bash[6], env, lambda s: _batch_values(s).get("/MYSAT/MAG_X") == raw2[0]
+            and _batch_values(s).get("/MAGCAL/MAG_X_CAL") is not None, "mission packets",
+        )  # fmt: skip
+        values = _batch_values(got)
+        assert np.max(np.abs(np.array([values[c] for c in cal]) - want)) < 1e-9
+    finally:
+        server.stop()

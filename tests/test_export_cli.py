@@ -54,6 +54,12 @@ def test_every_format_from_the_command_line(
     assert (tmp_path / "cos" / "targets" / "MAGCAL" / "lib" / "mag_calibration.py").is_file()
     assert main(["export", str(cal), "--format", "cosmos", "--out", str(tmp_path / "c.zip")]) == 0
     assert "vars.json" in zipfile.ZipFile(tmp_path / "c.zip").namelist()
+    inst = tmp_path / "yamcs"
+    assert main(["export", str(cal), "--format", "yamcs-instance", "--out", str(inst)]) == 0
+    assert (inst / "etc" / "yamcs.magcal.yaml").is_file() and (
+        inst / "mdb" / "MAGCAL.xml"
+    ).is_file()
+    assert "org.yamcs.YamcsServer --etc-dir etc" in capsys.readouterr().out
     assert main(["export", str(cal), "--format", "c-header", "--out", str(tmp_path / "m.h")]) == 0
     assert "ORBITCAL_MAGCAL_CRC32_F64" in (tmp_path / "m.h").read_text()
 
@@ -95,6 +101,8 @@ def test_polynomial_through_the_tools_own_evaluation(
         (["--format", "xtce", "--hk-names", "temperature"], "COLUMN=NAME"),
         (["--format", "xtce", "--hk-names", "temperature=MAG_X_RAW"], "MAG_X_RAW named twice"),
         (["--format", "yamcs-push"], "needs --yamcs-url and --yamcs-instance"),
+        (["--format", "xtce", "--yamcs-inputs", "qualified"], "not: MAG_X_RAW, MAG_Y_RAW"),
+        (["--format", "yamcs-instance", "--yamcs-instance", "a/b"], "must be a plain name"),
     ],
 )
 def test_bad_options_exit_2_with_one_line(

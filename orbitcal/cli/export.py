@@ -2,10 +2,11 @@
 board (CONTRACT sections 2 and 7).
 
 Formats: ``json`` (the document), ``xtce`` (Yamcs), ``yamcs-push`` (set a running Yamcs's
-coefficients; ``--out`` gets the report), ``cosmos`` (a folder, or a zip when ``PATH`` ends in
-``.zip``), ``c-header``, ``polynomial``. ``--telemetry`` (with ``--tle`` when the table has no
-positions) measures what the reduced forms drop on the table's held-out later blocks and writes
-it into the files. The Yamcs password is read from ``ORBITCAL_YAMCS_PASSWORD``, never from the
+coefficients; ``--out`` gets the report), ``yamcs-instance`` (a folder Yamcs 5.12 runs as it
+is, docs/yamcs.md), ``cosmos`` (each a folder, or a zip when ``PATH`` ends in ``.zip``),
+``c-header``, ``polynomial``. ``--telemetry`` (with ``--tle`` when the table has no positions)
+measures what the reduced forms drop on the table's held-out later blocks and writes it into
+the files. The Yamcs password is read from ``ORBITCAL_YAMCS_PASSWORD``, never from the
 command line.
 """
 
@@ -18,7 +19,7 @@ from orbitcal.cli._inputs import add_orbit_arguments
 
 __all__ = ["register", "run"]
 
-_FORMATS = ("json", "xtce", "yamcs-push", "cosmos", "c-header", "polynomial")
+_FORMATS = ("json", "xtce", "yamcs-push", "yamcs-instance", "cosmos", "c-header", "polynomial")
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -35,8 +36,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "--out",
         required=True,
         metavar="PATH",
-        help="output file (cosmos: a folder, or a zip when PATH ends in .zip; yamcs-push: the "
-        "report)",
+        help="output file (cosmos, yamcs-instance: a folder, or a zip when PATH ends in .zip; "
+        "yamcs-push: the report)",
     )
     p.add_argument(
         "--raw-names",
@@ -90,9 +91,21 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="frame of the table's quaternions (default: the calibration's)",
     )
     add_orbit_arguments(g)
-    y = p.add_argument_group("yamcs-push")
+    y = p.add_argument_group("Yamcs (xtce, yamcs-instance, yamcs-push)")
+    y.add_argument(
+        "--yamcs-inputs",
+        default="local",
+        choices=("local", "telemetered", "qualified"),
+        help="how the raw and housekeeping inputs reach Yamcs: local parameters settable over "
+        "REST (default), telemetered ones fed by a parameter link, or qualified references "
+        "(--raw-names /MYSAT/MAG_X,...) to the mission MDB's parameters",
+    )
     y.add_argument("--yamcs-url", metavar="URL", help="Yamcs base URL, e.g. http://host:8090")
-    y.add_argument("--yamcs-instance", metavar="NAME", help="Yamcs instance")
+    y.add_argument(
+        "--yamcs-instance",
+        metavar="NAME",
+        help="Yamcs instance (yamcs-push: required; yamcs-instance: its name, default magcal)",
+    )
     y.add_argument(
         "--yamcs-processor",
         default="realtime",
@@ -152,6 +165,8 @@ def run(args: argparse.Namespace) -> int:
         yamcs=yamcs,
         cosmos_target=args.cosmos_target,
         cosmos_packet=args.cosmos_packet,
+        yamcs_inputs=args.yamcs_inputs,
+        yamcs_instance=args.yamcs_instance or "magcal",
     )
     result = export(doc, options)
     written = result.write(args.out)
@@ -167,6 +182,10 @@ def run(args: argparse.Namespace) -> int:
             f"{loss.full_rms_nt:.4f} nT, affine part {loss.affine_rms_nt:.4f} nT, diagonal "
             f"polynomials {loss.diagonal_rms_nt:.4f} nT"
         )
+    if args.format == "yamcs-instance":
+        from orbitcal.export.yamcs_instance import START_COMMAND
+
+        print(f"export: start it with: cd {args.out} && {START_COMMAND}")
     if result.report is not None:
         print(
             f"export: set {result.report['n_set']} parameters on {args.yamcs_url} "

@@ -122,6 +122,7 @@ def held_out_loss(
 #: The file formats rendered from the calibration form: module and renderer, imported when used.
 _RENDERERS = {
     "xtce": ("orbitcal.export.xtce", "render_xtce"),
+    "yamcs-instance": ("orbitcal.export.yamcs_instance", "render_yamcs_instance"),
     "cosmos": ("orbitcal.export.cosmos", "render_cosmos"),
     "c-header": ("orbitcal.export.c_header", "render_c_header"),
     "polynomial": ("orbitcal.export.polynomial", "render_polynomial"),
@@ -131,6 +132,7 @@ _MEDIA = {
     "json": ("application/json", "calibration.json"),
     "xtce": ("application/xml", "magcal_xtce.xml"),
     "yamcs-push": ("application/json", "yamcs_push.json"),
+    "yamcs-instance": ("application/zip", "magcal_yamcs_instance.zip"),
     "cosmos": ("application/zip", "magcal_cosmos.zip"),
     "c-header": ("text/x-c", "orbitcal_magcal.h"),
     "polynomial": ("application/json", "magcal_polynomial.json"),
@@ -160,7 +162,7 @@ def export(doc: dict[str, Any], options: ExportOptions, *, transport: Any = None
     if options.format in _RENDERERS:
         module, name = _RENDERERS[options.format]
         rendered = getattr(importlib.import_module(module), name)(form, info, options)
-        files = options.format == "cosmos"  # a folder of files; the others one text
+        files = options.format in ("cosmos", "yamcs-instance")  # folders; the others one text
         return ExportResult(
             options.format,
             media,

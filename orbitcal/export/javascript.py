@@ -8,9 +8,24 @@ as an object whose ``value`` is the engineering value and each output as an obje
 parameters, named as in :meth:`AffineForm.coefficients` / :meth:`NetworkForm.coefficients`);
 outputs ``cal_x, cal_y, cal_z`` [nT]. ``tanh`` is written with ``Math.exp`` (ES5 has no
 ``Math.tanh``).
+
+Two more inputs, ``version`` and ``layout`` (the ``<SYS>_VERSION``/``_LAYOUT`` local
+parameters), carry the coefficients' version and shape. The text:
+
+* sets no output while any input has no value (Yamcs also holds it back: every input is a
+  ``Yamcs:AlgorithmMandatoryInput``), so a raw row before housekeeping gives no calibrated value,
+  never a TypeError or a zero;
+* refuses coefficients of another layout than the file's (no output, a warning event);
+* computes with coefficients of another version than the file's (set by ``yamcs-push``) and
+  says so once per version with an event (``Yamcs.info``; the version rule, docs/yamcs.md).
+
+Events go through Yamcs's ``Yamcs`` object when it is there (``AlgorithmFunctions``); elsewhere
+(node in the tests) they are skipped.
 """
 
 from __future__ import annotations
+
+import json
 
 from orbitcal.export.product import AffineForm, NetworkForm
 
@@ -35,10 +50,55 @@ def _vector(prefix: str, n: int) -> str:
     return "[" + ", ".join(f"{prefix}_{i}.value" for i in range(n)) + "]"
 
 
-def algorithm_text(form: AffineForm | NetworkForm, header: list[str]) -> str:
+def _guard(k: int, version: int, layout: str, system: str) -> list[str]:
+    """The lines that stop before any output: a missing input, another layout; and the event
+    of another version (``seen``: a global of the script engine, one per space system)."""
+    names = [*INPUT_RAW, *hk_inputs(k), "version", "layout"]
+    seen = f"orbitcal_{system.replace('-', '_')}_seen"
+    event = (
+        f"'{system}: computing with coefficients of version ' + version.value + ', set at run "
+        f"time; this MDB holds version {version}, which every restart serves again (load the "
+        "XTCE of version ' + version.value + ' to keep it)'"
+    )
+    refuse = (
+        f"'{system}: coefficients of layout ' + layout.value + ' refused: this algorithm was "
+        f"generated for {layout}; load the matching XTCE'"
+    )
+    return [
+        f"var FILE_VERSION = {version};",
+        f"var FILE_LAYOUT = {json.dumps(layout)};",
+        "var inputs = [" + ", ".join(names) + "];",
+        "for (var q = 0; q < inputs.length; q++) {",
+        "  if (inputs[q] === null || inputs[q] === undefined || inputs[q].value === null"
+        " || inputs[q].value === undefined) { return; }",
+        "}",
+        "var events = typeof Yamcs === 'undefined' ? null : Yamcs;",
+        "if (String(layout.value) !== FILE_LAYOUT) {",
+        f"  if (events !== null && this.{seen}_layout !== String(layout.value)) {{",
+        f"    events.warning('MagCalibration', {refuse});",
+        "  }",
+        f"  this.{seen}_layout = String(layout.value);",
+        "  return;",
+        "}",
+        f"if (Number(version.value) !== FILE_VERSION && this.{seen} !== Number(version.value)) {{",
+        f"  this.{seen} = Number(version.value);",
+        f"  if (events !== null) {{ events.info('MagCalibration', {event}); }}",
+        "}",
+    ]
+
+
+def algorithm_text(
+    form: AffineForm | NetworkForm,
+    header: list[str],
+    *,
+    version: int,
+    layout: str,
+    system: str,
+) -> str:
     """The algorithm text (function body) computing ``cal_*`` from the inputs."""
     k = len(form.hk_names)
     lines = [f"// {h}" for h in header]
+    lines += _guard(k, version, layout, system)
     lines.append(
         "var x = [raw_x.value, raw_y.value, raw_z.value"
         + "".join(f", hk_{j}.value" for j in range(k))

@@ -15,6 +15,7 @@ __all__ = [
     "DEFAULT_CAL_NAMES",
     "DEFAULT_RAW_NAMES",
     "FORMATS",
+    "YAMCS_INPUTS",
     "ExportError",
     "ExportOptions",
     "ExportResult",
@@ -25,7 +26,12 @@ __all__ = [
 ]
 
 #: CONTRACT section 7.
-FORMATS = ("json", "xtce", "yamcs-push", "cosmos", "c-header", "polynomial")
+FORMATS = ("json", "xtce", "yamcs-push", "yamcs-instance", "cosmos", "c-header", "polynomial")
+#: How the raw and housekeeping inputs reach a Yamcs algorithm (``--yamcs-inputs``): ``local``
+#: parameters defined in the file (settable over REST: replay, commissioning), ``telemetered``
+#: ones defined in the file (fed by a parameter link or stream by name), or ``qualified``
+#: references to parameters the mission's own MDB defines (every name ``/SYSTEM/NAME``).
+YAMCS_INPUTS = ("local", "telemetered", "qualified")
 DEFAULT_RAW_NAMES = ("MAG_X_RAW", "MAG_Y_RAW", "MAG_Z_RAW")
 DEFAULT_CAL_NAMES = ("MAG_X_CAL", "MAG_Y_CAL", "MAG_Z_CAL")
 
@@ -139,6 +145,11 @@ class ExportOptions:
         Where ``yamcs-push`` sends the coefficients.
     cosmos_target, cosmos_packet
         Default values of the plugin variables naming the packet that gets the DERIVED items.
+    yamcs_inputs
+        ``xtce``/``yamcs-instance``: how the inputs reach Yamcs, one of :data:`YAMCS_INPUTS`
+        (a qualified name refers to the mission's parameter in every mode).
+    yamcs_instance
+        ``yamcs-instance``: the name of the Yamcs instance written.
     """
 
     format: str = "json"
@@ -150,6 +161,8 @@ class ExportOptions:
     yamcs: YamcsTarget | None = None
     cosmos_target: str = "INST"
     cosmos_packet: str = "MAG"
+    yamcs_inputs: str = "local"
+    yamcs_instance: str = "magcal"
 
     def __post_init__(self) -> None:
         if self.format not in FORMATS:
@@ -162,12 +175,34 @@ class ExportOptions:
             raise ExportError("space_system must be a plain name", field="space_system")
         for n in (*self.raw_names, *self.cal_names, *self.hk_names.values()):
             _check_name(n, "names")
+        self._check_yamcs()
         clash = set(self.raw_names) & set(self.cal_names)
         if clash:
             raise ExportError(
                 f"raw and calibrated names must differ; both name {', '.join(sorted(clash))}",
                 field="cal_names",
             )
+
+    def _check_yamcs(self) -> None:
+        if self.yamcs_inputs not in YAMCS_INPUTS:
+            raise ExportError(
+                f"--yamcs-inputs: unknown {self.yamcs_inputs!r}; known: {', '.join(YAMCS_INPUTS)}",
+                field="yamcs_inputs",
+            )
+        if not _NAME.match(self.yamcs_instance):
+            raise ExportError(
+                f"Yamcs instance {self.yamcs_instance!r} must be a plain name (letters, digits, "
+                "'_' or '-')",
+                field="yamcs_instance",
+            )
+        if self.yamcs_inputs == "qualified":
+            plain = [n for n in (*self.raw_names, *self.hk_names.values()) if not n.startswith("/")]
+            if plain:
+                raise ExportError(
+                    "--yamcs-inputs qualified: every raw and housekeeping name must be the "
+                    f"mission's qualified /SYSTEM/NAME; not: {', '.join(plain)}",
+                    field="yamcs_inputs",
+                )
 
     def hk_parameter(self, column: str) -> str:
         """The mission name of housekeeping column ``column``."""

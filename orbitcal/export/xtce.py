@@ -3,17 +3,21 @@
 What it holds (namespace ``http://www.omg.org/spec/XTCE/20180204``, valid against the XTCE 1.2
 schema, ``tests/authorities/xtce/``):
 
-* the raw axes [nT] and housekeeping inputs, unless given as qualified references
+* the raw axes [nT] and housekeeping inputs as local parameters (settable over REST) or
+  telemetered ones (``options.yamcs_inputs``), unless given as qualified references
   (``/MYSAT/MAG_X``) to parameters the mission's MDB already defines;
 * the calibrated axes [nT] (``dataSource="derived"``), outputs of a JavaScript
   ``CustomAlgorithm`` that carries the **whole** calibration (the network too, for LM-BP);
 * every coefficient as a local parameter (``dataSource="local"``, ``initialValue`` = this
-  version), so ``yamcs-push`` (``POST .../parameters:batchSet``) installs a new version of the
-  same layout without an MDB reload; ``<SYS>_VERSION``, ``<SYS>_SHA256`` and ``<SYS>_LAYOUT``
-  say which version is loaded;
+  version, ``persistence="false"``: after a restart the file's version, :data:`VERSION_RULE`),
+  so ``yamcs-push`` (``POST .../parameters:batchSet``) installs a new version of the same layout
+  without an MDB reload until the next restart; ``<SYS>_VERSION``, ``<SYS>_SHA256`` and
+  ``<SYS>_LAYOUT`` say which version is served;
 * one strict-XTCE ``MathAlgorithm`` per axis with the affine part in postfix
-  (``<CAL>_LIN``): exact for the affine methods, the network's affine part otherwise (the header
-  says what it drops).
+  (``<CAL>_LIN``): exact for the affine methods, the network's affine part otherwise (its
+  description and the header say what it drops). It runs when the JavaScript algorithm has
+  computed the same row: Yamcs feeds a MathAlgorithm a missing input as 0, the JavaScript
+  algorithm waits for every input (``Yamcs:AlgorithmMandatoryInput``).
 
 Yamcs cannot do this with calibrators: a calibrator sees one parameter (its XTCE reader refuses
 other parameters inside one), so cross-axis terms need an algorithm.
@@ -35,10 +39,26 @@ from orbitcal.export.product import (
     layout,
 )
 
-__all__ = ["NS", "coefficient_values", "lin_name", "linear_postfix", "render_xtce"]
+__all__ = [
+    "NS",
+    "VERSION_RULE",
+    "coefficient_values",
+    "lin_name",
+    "linear_postfix",
+    "render_xtce",
+]
 
 NS = "http://www.omg.org/spec/XTCE/20180204"
 _T = f"{{{NS}}}"
+
+#: The one rule for versions across restarts (docs/yamcs.md), enforced by this file: every
+#: coefficient is a local parameter with ``persistence="false"``.
+VERSION_RULE = (
+    "Versions across restarts: after every (re)start of Yamcs the coefficients are this file's "
+    "version, whether or not the processor persists parameters; yamcs-push installs another "
+    "version of the same layout until the next restart (MagCalibration raises an event when it "
+    "computes with it); to keep a version across restarts, load its XTCE."
+)
 
 
 def coefficient_values(
@@ -108,6 +128,13 @@ def render_xtce(form: AffineForm | NetworkForm, info: ProductInfo, options: Expo
     ET.register_namespace("xtce", NS)
     hk_params = [options.hk_parameter(c) for c in form.hk_names]
     _check_names_differ(options, hk_params)
+    plain = [n for n in hk_params if not n.startswith("/")]
+    if options.yamcs_inputs == "qualified" and plain:
+        raise ExportError(
+            "--yamcs-inputs qualified: every housekeeping input needs the mission's qualified "
+            f"name (--hk-names COLUMN=/SYSTEM/NAME); not: {', '.join(plain)}",
+            field="hk_names",
+        )
     root = ET.Element(_T + "SpaceSystem", {"name": options.space_system})
     _describe(root, form, info, options)
     tm = _sub(root, "TelemetryMetaData")
@@ -135,13 +162,34 @@ def _check_names_differ(options: ExportOptions, hk_params: list[str]) -> None:
 def _describe(
     root: ET.Element, form: AffineForm | NetworkForm, info: ProductInfo, options: ExportOptions
 ) -> None:
-    """The SpaceSystem's LongDescription and Header with its notes (the product, what the
-    affine part carries and what it loses)."""
+    """The SpaceSystem's LongDescription (what Yamcs keeps and shows: the product, what the
+    affine part carries and loses, the version rule) and the Header with the same notes (Yamcs
+    drops ``NoteSet``; other XTCE tools read it)."""
+    carries = (
+        "the affine part b_cal = M (b_raw - o - K hk) in the MathAlgorithms *_LIN"
+        if isinstance(form, AffineForm)
+        else "the network's first-order expansion about the centre of its training inputs "
+        "in the MathAlgorithms *_LIN (the JavaScript algorithm carries the whole network)"
+    )
+    exact = is_exact_affine(form)
+    lines = info.lines() + loss_lines(
+        info, carries=carries, exact=exact, loss=options.loss, which="affine"
+    )
+    if options.loss is not None:
+        lines.append(
+            f"held-out RMS of the JavaScript algorithm (whole calibration): "
+            f"{options.loss.full_rms_nt:.6g} nT"
+        )
     desc = _sub(root, "LongDescription")
-    desc.text = (
-        f"orbitcal magnetometer calibration of {info.spacecraft}, version {info.version} "
-        f"({info.method}). The JavaScript algorithm MagCalibration carries the whole "
-        "calibration; the MathAlgorithms *_LIN carry its affine part."
+    desc.text = "\n".join(
+        [
+            f"orbitcal magnetometer calibration of {info.spacecraft}, version {info.version} "
+            f"({info.method}). The JavaScript algorithm MagCalibration carries the whole "
+            "calibration; the MathAlgorithms *_LIN carry its affine part. Both compute only when "
+            "every raw and housekeeping input has a value.",
+            VERSION_RULE,
+            *lines,
+        ]
     )
     header = _sub(
         root,
@@ -152,22 +200,8 @@ def _describe(
         validationStatus="Working",
     )
     notes = _sub(header, "NoteSet")
-    carries = (
-        "the affine part b_cal = M (b_raw - o - K hk) in the MathAlgorithms *_LIN"
-        if isinstance(form, AffineForm)
-        else "the network's first-order expansion about the centre of its training inputs "
-        "in the MathAlgorithms *_LIN (the JavaScript algorithm carries the whole network)"
-    )
-    exact = is_exact_affine(form)
-    for line in info.lines() + loss_lines(
-        info, carries=carries, exact=exact, loss=options.loss, which="affine"
-    ):
+    for line in [VERSION_RULE, *lines]:
         _sub(notes, "Note").text = line
-    if options.loss is not None:
-        _sub(notes, "Note").text = (
-            f"held-out RMS of the JavaScript algorithm (whole calibration): "
-            f"{options.loss.full_rms_nt:.6g} nT"
-        )
 
 
 def _parameter_types(tm: ET.Element) -> None:
@@ -188,34 +222,71 @@ def _parameters(
     options: ExportOptions,
     hk_params: list[str],
 ) -> None:
-    """The ParameterSet: raw and housekeeping (telemetered), calibrated and their affine parts
-    (derived), the coefficients (local); names starting with ``/`` are the mission's own."""
+    """The ParameterSet: raw and housekeeping inputs (``options.yamcs_inputs``: local or
+    telemetered), calibrated and their affine parts (derived), the coefficients (local); names
+    starting with ``/`` are the mission's own. ``persistence`` is written on the local
+    parameters only, where Yamcs reads it (``persistParameters``), and is off: after a (re)start
+    the coefficients are this file's (the version rule, docs/yamcs.md) and a replayed raw value
+    does not come back."""
     params = _sub(tm, "ParameterSet")
 
-    def param(name: str, type_ref: str, source: str, initial: str | None = None) -> None:
+    def param(name: str, type_ref: str, source: str, what: str, initial: str | None = None) -> None:
         if name.startswith("/"):
             return  # defined in the mission's MDB
-        attrib = {"name": name, "parameterTypeRef": type_ref}
+        attrib = {"name": name, "parameterTypeRef": type_ref, "shortDescription": what}
         if initial is not None:
             attrib["initialValue"] = initial
         p = _sub(params, "Parameter", **attrib)
-        _sub(p, "ParameterProperties", dataSource=source, persistence="true")
+        if source == "local":
+            _sub(p, "ParameterProperties", dataSource=source, persistence="false")
+        else:
+            _sub(p, "ParameterProperties", dataSource=source)
 
-    for name in options.raw_names:
-        param(name, "MagneticField_nT", "telemetered")
-    for name in hk_params:
-        param(name, "Housekeeping", "telemetered")
-    for name in options.cal_names:
-        param(name, "MagneticField_nT", "derived")
-        param(lin_name(name), "MagneticField_nT", "derived")
+    inputs = "local" if options.yamcs_inputs == "local" else "telemetered"
+    for axis, name in zip("XYZ", options.raw_names, strict=True):
+        param(name, "MagneticField_nT", inputs, f"raw magnetometer {axis} [nT], sensor axes")
+    for column, name in zip(form.hk_names, hk_params, strict=True):
+        param(name, "Housekeeping", inputs, f"housekeeping {column} (its table unit)")
+    exact = is_exact_affine(form)
+    for axis, name in zip("XYZ", options.cal_names, strict=True):
+        param(name, "MagneticField_nT", "derived", f"calibrated {axis} [nT]: {_whole(info)}")
+        param(lin_name(name), "MagneticField_nT", "derived", _lin_says(axis, info, options, exact))
     values = coefficient_values(form, info, options)
     for name, value in values.items():
+        what = _COEF_SAYS.get(name.removeprefix(options.space_system + "_"), "coefficient")
         if isinstance(value, str):
-            param(name, "Text", "local", value)
+            param(name, "Text", "local", what, value)
         elif isinstance(value, int):
-            param(name, "Version", "local", str(value))
+            param(name, "Version", "local", what, str(value))
         else:
-            param(name, "Coefficient", "local", f64(value))
+            param(name, "Coefficient", "local", what, f64(value))
+
+
+_COEF_SAYS = {
+    "VERSION": "calibration version the coefficients belong to (set last by yamcs-push)",
+    "SHA256": "SHA-256 of the calibration document of these coefficients",
+    "LAYOUT": "shape of the coefficient set; yamcs-push refuses another",
+}
+
+
+def _whole(info: ProductInfo) -> str:
+    return f"the whole {info.method} calibration (equals orbitcal apply)"
+
+
+def _lin_says(axis: str, info: ProductInfo, options: ExportOptions, exact: bool) -> str:
+    """What ``<CAL>_LIN`` is, said where Yamcs shows it (its description)."""
+    if exact:
+        return f"calibrated {axis} [nT] by the affine MathAlgorithm: equals the whole calibration"
+    off = (
+        "not measured"
+        if options.loss is None
+        else f"held-out RMS {options.loss.affine_rms_nt:.3g} nT vs "
+        f"{options.loss.full_rms_nt:.3g} nT, up to {options.loss.affine_max_abs_diff_nt:.3g} nT off"
+    )
+    return (
+        f"affine part only of the {info.method} network [nT], NOT the calibration ({off}); "
+        f"use the calibrated {axis}"
+    )
 
 
 def _algorithms(
@@ -225,22 +296,36 @@ def _algorithms(
     options: ExportOptions,
     hk_params: list[str],
 ) -> None:
-    """The AlgorithmSet: the JavaScript MagCalibration (the whole calibration) and one
-    MathAlgorithm per axis (its affine part)."""
+    """The AlgorithmSet: the JavaScript MagCalibration (the whole calibration; every input
+    mandatory, so Yamcs runs it only once each has a value) and one MathAlgorithm per axis (its
+    affine part), triggered by MagCalibration's output of that axis: a MathAlgorithm has no
+    mandatory inputs and would read a missing one as 0."""
     sys_ = options.space_system
     algos = _sub(tm, "AlgorithmSet")
     custom = _sub(algos, "CustomAlgorithm", name="MagCalibration")
+    _sub(custom, "LongDescription").text = (
+        f"the whole {info.method} calibration, version {info.version}; runs once every input "
+        "has a value; raises an event when it computes with coefficients of another version "
+        "than this file's (set by yamcs-push), and refuses coefficients of another layout"
+    )
+    ins: list[tuple[str, str]] = list(zip(options.raw_names, INPUT_RAW, strict=True))
+    ins += list(zip(hk_params, hk_inputs(len(hk_params)), strict=True))
+    ins += [(f"{sys_}_VERSION", "version"), (f"{sys_}_LAYOUT", "layout")]
+    ins += [(f"{sys_}_{coef}", coef) for coef in form.coefficients()]
+    ancillary = _sub(custom, "AncillaryDataSet")
+    for _, in_name in ins:
+        _sub(ancillary, "AncillaryData", name="Yamcs:AlgorithmMandatoryInput").text = in_name
     text = _sub(custom, "AlgorithmText", language="JavaScript")
     text.text = algorithm_text(
-        form, [f"orbitcal: {info.spacecraft} v{info.version} {info.method} sha256 {info.sha256}"]
+        form,
+        [f"orbitcal: {info.spacecraft} v{info.version} {info.method} sha256 {info.sha256}"],
+        version=info.version,
+        layout=layout(form),
+        system=sys_,
     )
     inputs = _sub(custom, "InputSet")
-    for name, in_name in zip(options.raw_names, INPUT_RAW, strict=True):
+    for name, in_name in ins:
         _sub(inputs, "InputParameterInstanceRef", parameterRef=name, inputName=in_name)
-    for name, in_name in zip(hk_params, hk_inputs(len(hk_params)), strict=True):
-        _sub(inputs, "InputParameterInstanceRef", parameterRef=name, inputName=in_name)
-    for coef in form.coefficients():
-        _sub(inputs, "InputParameterInstanceRef", parameterRef=f"{sys_}_{coef}", inputName=coef)
     outputs = _sub(custom, "OutputSet")
     for name, out_name in zip(options.cal_names, OUTPUTS, strict=True):
         _sub(outputs, "OutputParameterRef", parameterRef=name, outputName=out_name)
@@ -253,5 +338,4 @@ def _algorithms(
         op = _sub(algo, "MathOperation", outputParameterRef=lin_name(name))
         _postfix(op, linear_postfix(axis, options.raw_names, hk_params, f"{sys_}_LIN_"))
         trig = _sub(op, "TriggerSet")
-        for raw in options.raw_names:
-            _sub(trig, "OnParameterUpdateTrigger", parameterRef=raw)
+        _sub(trig, "OnParameterUpdateTrigger", parameterRef=name)

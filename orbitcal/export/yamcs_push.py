@@ -11,9 +11,11 @@ Uses the Yamcs HTTP API (``yamcs-api`` ``processing.proto``):
    coefficient (then ``_SHA256`` and ``_VERSION`` last, so a reader that sees the new version
    sees its coefficients).
 
-Local parameters persist across a Yamcs restart when the processor runs with
-``persistParameters: true``. Credentials go as HTTP Basic authentication (Yamcs
-``HttpHandler``).
+A push lasts until the next restart of Yamcs: the XTCE marks every coefficient
+``persistence="false"``, so after a (re)start the coefficients are the loaded file's, with or
+without ``persistParameters`` (the version rule, docs/yamcs.md; tested against a real Yamcs in
+tests/test_export_yamcs_real.py). The report says so. Credentials go as HTTP Basic
+authentication (Yamcs ``HttpHandler``).
 """
 
 from __future__ import annotations
@@ -138,4 +140,6 @@ def push_to_yamcs(
             for r in body["request"]
         },
         "n_set": len(body["request"]),
+        "lasts": "until the next restart of Yamcs, which serves the loaded MDB file's version "
+        "again; to keep this version, load its XTCE (docs/yamcs.md)",
     }

@@ -51,7 +51,7 @@ FormatQuery = Annotated[
     str | None,
     Query(
         description="export format (CONTRACT section 7): json, xtce, yamcs-push (the batchSet "
-        "body), cosmos (zip), c-header, polynomial"
+        "body), yamcs-instance (zip), cosmos (zip), c-header, polynomial"
     ),
 ]
 NamesQuery = Annotated[str | None, Query(description="three parameter names X,Y,Z")]
@@ -124,7 +124,7 @@ def export_response(
     (:func:`_version_loss`)."""
     loss = None
     reduced = fmt == "polynomial" or (
-        fmt in ("xtce", "c-header") and not is_exact_affine(calibration_form(doc))
+        fmt in ("xtce", "yamcs-instance", "c-header") and not is_exact_affine(calibration_form(doc))
     )
     if reduced and engine is not None and spacecraft_id is not None:
         loss = _version_loss(engine, spacecraft_id, doc)

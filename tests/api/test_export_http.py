@@ -72,7 +72,15 @@ def test_formats_over_http(served: Served) -> None:
     answers: dict[str, Any] = {}
     with served.server.client() as c:
         c.get("/v1/spacecraft/swarm-a/calibration")  # fills the read cache: the fast path
-        for fmt in ("json", "xtce", "cosmos", "c-header", "polynomial", "yamcs-push"):
+        for fmt in (
+            "json",
+            "xtce",
+            "yamcs-instance",
+            "cosmos",
+            "c-header",
+            "polynomial",
+            "yamcs-push",
+        ):
             a = c.get(f"/v1/spacecraft/swarm-a/calibration?format={fmt}")
             assert a.status_code == 200, (fmt, a.text)
             assert a.headers["x-orbitcal-document-sha256"] == document_sha256(doc)
@@ -95,6 +103,14 @@ def test_formats_over_http(served: Served) -> None:
     assert answers["xtce"].headers["content-type"] == "application/xml"
     assert "attachment" in answers["xtce"].headers["content-disposition"]
     assert b'name="CX_LIN"' in named.content and b'name="BX"' in named.content
+    # issue 45: the ready Yamcs instance as a zip, its MDB the xtce answer
+    instance = zipfile.ZipFile(io.BytesIO(answers["yamcs-instance"].content))
+    assert sorted(instance.namelist()) == [
+        "README.md", "etc/processor.yaml", "etc/yamcs.magcal.yaml", "etc/yamcs.yaml",
+        "mdb/MAGCAL.xml",
+    ]  # fmt: skip
+    assert instance.read("mdb/MAGCAL.xml") == answers["xtce"].content
+    assert answers["yamcs-instance"].headers["content-type"] == "application/zip"
     files = zipfile.ZipFile(io.BytesIO(answers["cosmos"].content)).namelist()
     assert "targets/MAGCAL/lib/mag_calibration.py" in files
     assert b"ORBITCAL_MAGCAL_SHA256" in answers["c-header"].content
