@@ -112,7 +112,8 @@ def variance_change_index(residual_nt: npt.ArrayLike) -> int:
     maximising ``−j ln σ̂²(:j) − (N − j) ln σ̂²(j:)`` over ``1 ≤ j < N``, per-sample mean squares
     over the three components. 0 when there are fewer than two samples.
     """
-    r = np.asarray(residual_nt, dtype=float).reshape(len(residual_nt), -1)
+    r = np.asarray(residual_nt, dtype=float)
+    r = r.reshape(r.shape[0], -1)
     e = np.mean(r**2, axis=1)
     n = e.shape[0]
     if n < 2:

@@ -33,6 +33,7 @@ from service.routes import (
     calibrations,
     dashboard,
     exports,
+    health,
     jobs,
     keys,
     ops,
@@ -251,7 +252,8 @@ def add_middleware(app: FastAPI, settings: Settings, state: ServiceState) -> Non
 
 
 def include_routes(app: FastAPI) -> None:
-    for module in (ops, spacecraft, telemetry, quarantine, calibrations, jobs, keys, dashboard):
+    modules = (ops, spacecraft, telemetry, quarantine, calibrations, health, jobs, keys, dashboard)
+    for module in modules:
         app.include_router(module.router)
     app.include_router(exports.router)  # issue 21: /calibrations/{version}[?format=F]
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import time
 from typing import Annotated, Any, Literal, cast
 
@@ -13,6 +14,7 @@ from fastapi.responses import Response
 from orbitcal.telemetry import RowError
 from service.auth import Principal, require_scope
 from service.deps import EngineDep, SettingsDep, get_spacecraft
+from service.health import request_retraining, score_new_samples
 from service.ingest import (
     CCSDS_MEDIA_TYPE,
     MEDIA_TYPES,
@@ -24,6 +26,8 @@ from service.schemas import ErrorPublic, IngestResult
 from service.storage import insert_samples, log_upload, read_tx, write_tx
 
 __all__ = ["router"]
+
+log = logging.getLogger("orbitcal.service.telemetry")
 
 router = APIRouter(prefix="/v1/spacecraft", tags=["telemetry"])
 
@@ -136,6 +140,8 @@ async def ingest_telemetry(
                 accepted += insert_samples(conn, sc.pk, rows)
             duplicates = len(parsed.telemetry) - accepted
             log_upload(conn, sc.pk, fmt=fmt, accepted=accepted, duplicates=duplicates, rejected=bad)
+        if accepted:
+            _check_health(request, sc.pk)
         head = {"accepted": accepted, "duplicates": duplicates}
         return 200, _result_json(head, parsed.rejected), accepted, duplicates, n_rejected
 
@@ -147,6 +153,20 @@ async def ingest_telemetry(
     if status == 200:
         metrics.ingest_seconds.labels(fmt).observe(time.perf_counter() - started)
     return Response(payload, status_code=status, media_type="application/json")
+
+
+def _check_health(request: Request, spacecraft_pk: int) -> None:
+    """After the commit: score the new samples against the calibration in service and, when it
+    is stale, queue the retraining on post-change data (service.health). Never fails the upload
+    (its rows are stored): a failure is logged."""
+    state = request.app.state
+    try:
+        if score_new_samples(state.engine, state.settings, spacecraft_pk):
+            job_id = request_retraining(state.engine, state.settings, spacecraft_pk)
+            if job_id is not None:
+                state.runner.submit(job_id)
+    except Exception:  # the upload is committed; health catches up on the next one
+        log.exception("health check after upload failed")
 
 
 def _upload_format(request: Request) -> str:
