@@ -216,7 +216,10 @@ class HealthPoint(Base):
     """One scored batch of a spacecraft's new samples against a calibration (service.health)."""
 
     __tablename__ = "health_points"
-    __table_args__ = (sa.UniqueConstraint("spacecraft_pk", "start_us", "version", "kind"),)
+    __table_args__ = (
+        sa.UniqueConstraint("spacecraft_pk", "start_us", "version", "kind"),
+        sa.Index("ix_health_points_sc_end", "spacecraft_pk", "end_us"),
+    )
 
     pk: Mapped[int] = mapped_column(sa.Integer, primary_key=True, autoincrement=True)
     spacecraft_pk: Mapped[int] = mapped_column(
