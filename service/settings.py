@@ -74,7 +74,9 @@ class Settings(BaseSettings):
     #: Retraining defaults.
     method: str = "linear"
     reference_field: str = "IGRF-14"
-    holdout_fraction: float = 0.2
+    #: The share held out for ``holdout_rms_nt``: one default on every surface (CLI, library,
+    #: service), ``orbitcal.calibrate.holdout.HOLDOUT_FRACTION``.
+    holdout_fraction: float = 0.25
     window_s: float = 86400.0  # sliding window of the most recent data [s]
     min_samples: int = 200  # a fit needs at least this many samples in the window
     #: Calibration health (service/health.py): new samples are scored in batches of at least

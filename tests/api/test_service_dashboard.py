@@ -369,7 +369,7 @@ def test_dashboard_in_chromium(fleet: Fleet, tmp_path: Path) -> None:
         browser.wait_for("document.body.dataset.ready === 'empty-sat'")
         assert browser.evaluate("document.getElementById('error-banner').hidden")
         for section, text in (
-            ("cal-empty", "No calibration in service yet"),
+            ("health-line", "No calibration in service yet"),
             ("residual-empty", "No calibration in service"),
             ("versions-caption", "No calibration version yet"),
             ("samples-caption", "No samples stored yet"),
@@ -380,7 +380,13 @@ def test_dashboard_in_chromium(fleet: Fleet, tmp_path: Path) -> None:
             shown = browser.evaluate(f"document.getElementById('{section}').innerText")
             assert shown.startswith(text), (section, shown)
         # nothing left over from the spacecraft shown before: no plot, no empty table
-        for name in ("plot-residual", "plot-versions", "plot-samples", "plot-rejected"):
+        for name in (
+            "plot-health",
+            "plot-residual",
+            "plot-versions",
+            "plot-samples",
+            "plot-rejected",
+        ):
             display = browser.evaluate(
                 f"getComputedStyle(document.getElementById('{name}')).display"
             )
@@ -551,7 +557,7 @@ def test_dashboard_with_authentication_off(tmp_path: Path) -> None:
                 "({banner: document.getElementById('error-banner').hidden,"
                 " notice: document.getElementById('notice').hidden,"
                 " key: document.getElementById('key-state').innerText,"
-                " cal: document.getElementById('cal-empty').innerText,"
+                " cal: document.getElementById('health-line').innerText,"
                 " samples: document.getElementById('samples-caption').innerText})"
             )
             shot = browser.screenshot(tmp_path / "dashboard-auth-off.png")
