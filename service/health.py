@@ -397,6 +397,7 @@ def series(conn: Connection, spacecraft_pk: int, *, limit: int = 2000) -> list[d
             "cusum": p.cusum,
             "stale": p.stale,
             "change_at": None if p.change_at_us is None else iso(p.change_at_us / 1e6),
+            "scored_at": iso(p.created_at),
         }
         for p in reversed(rows)
     ]

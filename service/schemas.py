@@ -255,3 +255,4 @@ class HealthPointPublic(BaseModel):
     cusum: float = Field(description="the change rule's CUSUM S_k [ln]; stale from ln 4 on")
     stale: bool
     change_at: str | None
+    scored_at: str = Field(description="ISO-8601 UTC (wall clock): when the service scored it")
