@@ -23,6 +23,7 @@ from uvicorn.middleware.proxy_headers import ProxyHeadersMiddleware
 import orbitcal
 from service.auth import is_loopback
 from service.handlers import add_exception_handlers
+from service.health import HealthWorker
 from service.http import HeaderCount
 from service.jobs import FitFunction, InlineRunner, JobRunner, recover_interrupted
 from service.logs import configure_logging, redact_url
@@ -161,12 +162,14 @@ def make_lifespan(
         scheduler = FleetScheduler(engine, settings, job_runner)
         if settings.scheduler and leader is not None:
             scheduler.start()
+        health_worker = HealthWorker(engine, settings, job_runner)
         state.open(
             engine=engine,
             metrics=state.metrics,
             runner=job_runner,
             scheduler=scheduler,
             leader=leader is not None,
+            health=health_worker,
         )
         log.info(
             "service started",
@@ -181,6 +184,7 @@ def make_lifespan(
             yield
         finally:
             state.diagnoses.shutdown()
+            health_worker.shutdown()
             scheduler.shutdown()
             job_runner.shutdown()
             engine.dispose()

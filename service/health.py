@@ -2,8 +2,10 @@
 in service, the change rule run on that series, and a retraining on post-change data when it
 fires (issue 47; the rule is :mod:`orbitcal.health`, documented in docs/design.md).
 
-* :func:`score_new_samples` runs after an upload's commit (the ingest route, in the request's
-  worker thread, so the answer and the health series agree when the client reads them). It scores
+* :func:`score_new_samples` runs after an upload's commit, off the request path: the ingest route
+  hands the spacecraft to the app's :class:`HealthWorker` (one thread) and answers; the health
+  routes wait for that spacecraft's pending scoring first, so what a client reads after its
+  upload's answer includes that upload (deterministic for tests). It scores
   the samples newer than the spacecraft's last scored one once there are ``health_min_samples``
   of them (at most the newest ``health_max_samples``), in the one RMS of CONTRACT "Definitions".
 * :func:`record_holdout` starts a new version's series with its score on its own held-out block
@@ -43,6 +45,7 @@ from service.storage import (
 
 __all__ = [
     "RULE",
+    "HealthWorker",
     "Scored",
     "change_since_utc_s",
     "health_answer",
@@ -401,3 +404,56 @@ def series(conn: Connection, spacecraft_pk: int, *, limit: int = 2000) -> list[d
         }
         for p in reversed(rows)
     ]
+
+
+class HealthWorker:
+    """Scores uploads in one background thread, per spacecraft in order, coalescing uploads that
+    arrive while a scoring of that spacecraft waits (it reads every new sample anyway).
+
+    ``submit(pk)`` after an upload's commit; ``wait(pk)`` before answering what the health of
+    ``pk`` is. A stale calibration's retraining is queued on ``runner``.
+    """
+
+    def __init__(self, engine: Engine, settings: Settings, runner: Any) -> None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        self.engine = engine
+        self.settings = settings
+        self.runner = runner
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="orbitcal-health")
+        self._guard = threading.Lock()
+        self._waiting: set[int] = set()
+        self._last: dict[int, Any] = {}
+
+    def submit(self, spacecraft_pk: int) -> None:
+        with self._guard:
+            if spacecraft_pk in self._waiting:
+                return  # a scoring not yet started will read this upload's samples too
+            self._waiting.add(spacecraft_pk)
+            self._last[spacecraft_pk] = self._pool.submit(self._run, spacecraft_pk)
+
+    def wait(self, spacecraft_pk: int, timeout_s: float = 60.0) -> None:
+        """Until the scoring of ``spacecraft_pk`` submitted so far is done (bounded)."""
+        with self._guard:
+            future = self._last.get(spacecraft_pk)
+        if future is not None:
+            from concurrent.futures import TimeoutError as FutureTimeout
+
+            try:
+                future.result(timeout=timeout_s)
+            except FutureTimeout:
+                log.warning("health: scoring still running", extra={"pk": spacecraft_pk})
+
+    def _run(self, spacecraft_pk: int) -> None:
+        with self._guard:
+            self._waiting.discard(spacecraft_pk)
+        try:
+            if score_new_samples(self.engine, self.settings, spacecraft_pk):
+                job_id = request_retraining(self.engine, self.settings, spacecraft_pk)
+                if job_id is not None:
+                    self.runner.submit(job_id)
+        except Exception:  # the upload is stored; the next one scores its samples too
+            log.exception("health check after upload failed")
+
+    def shutdown(self) -> None:
+        self._pool.shutdown(wait=True, cancel_futures=True)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, HTTPException, Query
+from fastapi import APIRouter, HTTPException, Query, Request
 
 from service.auth import Principal, require_scope
 from service.deps import EngineDep, SettingsDep, get_spacecraft
@@ -29,6 +29,7 @@ _ERRORS: dict[int | str, dict[str, Any]] = {
 @router.get("/{spacecraft_id}/health", responses=_ERRORS)
 def health(
     spacecraft_id: str,
+    request: Request,
     engine: EngineDep,
     settings: SettingsDep,
     _who: Annotated[Principal, require_scope("read")],
@@ -36,7 +37,11 @@ def health(
     """The calibration in service against the newest data: its RMS on the newest scored batch
     (CONTRACT "Definitions"), that batch's noise floor, whether the change rule found it stale
     (docs/design.md, "Calibration health"), when the change began and when the next retraining
-    is due. 404 before the first calibration."""
+    is due. 404 before the first calibration. Uploads answered before this request are
+    scored first."""
+    with read_tx(engine) as conn:
+        pk = get_spacecraft(conn, spacecraft_id).pk
+    request.app.state.health.wait(pk)
     with read_tx(engine) as conn:
         sc = get_spacecraft(conn, spacecraft_id)
         answer = health_answer(conn, settings, sc)
@@ -48,6 +53,7 @@ def health(
 @router.get("/{spacecraft_id}/health/series", responses=_ERRORS)
 def health_series(
     spacecraft_id: str,
+    request: Request,
     engine: EngineDep,
     _who: Annotated[Principal, require_scope("read")],
     limit: Annotated[int, Query(ge=1, le=100_000)] = 2000,
@@ -56,6 +62,9 @@ def health_series(
     samples of an upload, or ``holdout``: the version's own held-out block when it went into
     service), span, samples, RMS, noise floor, the held-out RMS it is compared with, the CUSUM,
     stale, and on the alarm's point when the change began."""
+    with read_tx(engine) as conn:
+        pk = get_spacecraft(conn, spacecraft_id).pk
+    request.app.state.health.wait(pk)
     with read_tx(engine) as conn:
         sc = get_spacecraft(conn, spacecraft_id)
         return [HealthPointPublic(**p) for p in series(conn, sc.pk, limit=limit)]

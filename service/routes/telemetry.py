@@ -14,7 +14,6 @@ from fastapi.responses import Response
 from orbitcal.telemetry import RowError
 from service.auth import Principal, require_scope
 from service.deps import EngineDep, SettingsDep, get_spacecraft
-from service.health import request_retraining, score_new_samples
 from service.ingest import (
     CCSDS_MEDIA_TYPE,
     MEDIA_TYPES,
@@ -156,15 +155,11 @@ async def ingest_telemetry(
 
 
 def _check_health(request: Request, spacecraft_pk: int) -> None:
-    """After the commit: score the new samples against the calibration in service and, when it
-    is stale, queue the retraining on post-change data (service.health). Never fails the upload
-    (its rows are stored): a failure is logged."""
-    state = request.app.state
+    """After the commit: the new samples go to the health worker (service.health), which scores
+    them against the calibration in service off the request path and queues a retraining when it
+    is stale. Never fails the upload (its rows are stored)."""
     try:
-        if score_new_samples(state.engine, state.settings, spacecraft_pk):
-            job_id = request_retraining(state.engine, state.settings, spacecraft_pk)
-            if job_id is not None:
-                state.runner.submit(job_id)
+        request.app.state.health.submit(spacecraft_pk)
     except Exception:  # the upload is committed; health catches up on the next one
         log.exception("health check after upload failed")
 
