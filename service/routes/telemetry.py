@@ -140,7 +140,7 @@ async def ingest_telemetry(
             duplicates = len(parsed.telemetry) - accepted
             log_upload(conn, sc.pk, fmt=fmt, accepted=accepted, duplicates=duplicates, rejected=bad)
         if accepted:
-            _check_health(request, sc.pk)
+            _check_health(request, sc.pk, parsed.telemetry if not duplicates else None)
         head = {"accepted": accepted, "duplicates": duplicates}
         return 200, _result_json(head, parsed.rejected), accepted, duplicates, n_rejected
 
@@ -154,12 +154,12 @@ async def ingest_telemetry(
     return Response(payload, status_code=status, media_type="application/json")
 
 
-def _check_health(request: Request, spacecraft_pk: int) -> None:
+def _check_health(request: Request, spacecraft_pk: int, fresh: Any) -> None:
     """After the commit: the new samples go to the health worker (service.health), which scores
     them against the calibration in service off the request path and queues a retraining when it
     is stale. Never fails the upload (its rows are stored)."""
     try:
-        request.app.state.health.submit(spacecraft_pk)
+        request.app.state.health.submit(spacecraft_pk, fresh)
     except Exception:  # the upload is committed; health catches up on the next one
         log.exception("health check after upload failed")
 

@@ -105,6 +105,13 @@ def _scenario(settings: Settings) -> None:
         g = _gauges(c)
         assert g["orbitcal_health_stale"] == 0.0
         assert g["orbitcal_health_recent_rms_nt"] == pytest.approx(h["recent_rms_nt"])
+        # an upload with duplicates (read back from the database): only its new rows are scored
+        again, _ = world(t - 10.0 * 100, 100 + BATCH, sensor=SENSOR_A, seed=13, positions=False)
+        _upload(c, again)
+        t += 10.0 * BATCH
+        assert not c.get("/v1/spacecraft/sc/health").json()["stale"]
+        last = series_of(c)[-1]
+        assert last["n"] == BATCH and _utc_s(last["end"]) == pytest.approx(t - 10.0)
 
         # the sensor changes 130 samples into the next upload
         change_s = t + 10.0 * 130
@@ -136,7 +143,7 @@ def _scenario(settings: Settings) -> None:
         assert h["recent_rms_nt"] < 3 * SENSOR_B.noise_nt
         assert _gauges(c)["orbitcal_health_stale"] == 0.0
         kinds = [(p["version"], p["kind"], p["stale"]) for p in series_of(c)]
-        assert kinds[:4] == [(1, "holdout", False)] + [(1, "new", False)] * 3
+        assert kinds[:5] == [(1, "holdout", False)] + [(1, "new", False)] * 4
         assert (1, "new", True) in kinds and kinds[-1] == (2, "new", False)
 
 
