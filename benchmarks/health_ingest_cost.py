@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import io
+import os
 import platform
 import statistics
 import sys
@@ -99,7 +100,9 @@ def main() -> int:
         "(`plain`: parse, validate, commit) and to one with a `linear` calibration in service "
         "(`scored`: the same, then the new samples scored against it, after the answer); "
         '"whole": per upload, a run of uploads until `GET …/health` has their scores; '
-        f"{points} health points were recorded.",
+        f"{points} health points were recorded. Load average at the end "
+        f"{', '.join(f'{x:.1f}' for x in os.getloadavg())} (other work on the machine: the "
+        "ratios move by ±0.5 from run to run; run it on a quiet machine to quote them).",
         "",
         "| samples per upload | answer, plain [ms] | answer, scored [ms] | ratio "
         "| whole, plain [ms] | whole, scored [ms] | ratio |",

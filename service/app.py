@@ -23,7 +23,7 @@ from uvicorn.middleware.proxy_headers import ProxyHeadersMiddleware
 import orbitcal
 from service.auth import is_loopback
 from service.handlers import add_exception_handlers
-from service.health import HealthWorker
+from service.health_worker import HealthWorker
 from service.http import HeaderCount
 from service.jobs import FitFunction, InlineRunner, JobRunner, recover_interrupted
 from service.logs import configure_logging, redact_url

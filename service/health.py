@@ -3,17 +3,18 @@ in service, the change rule run on that series, and a retraining on post-change 
 fires (issue 47; the rule is :mod:`orbitcal.health`, documented in docs/design.md).
 
 * :func:`score_new_samples` runs after an upload's commit, off the request path: the ingest route
-  hands the spacecraft to the app's :class:`HealthWorker` (one thread) and answers; the health
-  routes wait for that spacecraft's pending scoring first, so what a client reads after its
-  upload's answer includes that upload (deterministic for tests). It scores
-  the samples newer than the spacecraft's last scored one once there are ``health_min_samples``
-  of them (at most the newest ``health_max_samples``), in the one RMS of CONTRACT "Definitions".
+  hands the spacecraft to the app's :class:`service.health_worker.HealthWorker` (one thread) and
+  answers; the health routes wait for that spacecraft's pending scoring first, so what a client
+  reads after its upload's answer includes that upload (deterministic for tests). It scores the
+  samples newer than the spacecraft's last scored one once there are ``health_min_samples`` of
+  them (at most the newest ``health_max_samples``), in the one RMS of CONTRACT "Definitions".
 * :func:`record_holdout` starts a new version's series with its score on its own held-out block
   (the retraining job calls it after a promotion): the series is never empty under a version.
 * When the rule fires, the point carries ``change_at`` (where the change began), the version is
-  stale, and :func:`request_retraining` queues a retraining as soon as ``min_samples`` samples
-  after the change are stored; :func:`change_since_utc_s` makes every retraining of the
-  spacecraft start at the change (``service.jobs``). A stale version is never pushed to Yamcs.
+  stale, and ``service.health_worker.request_retraining`` queues a retraining as soon as
+  ``min_samples`` samples after the change are stored; :func:`change_since_utc_s` makes every
+  retraining of the spacecraft start at the change (``service.jobs``). A stale version is never
+  pushed to Yamcs.
 """
 
 from __future__ import annotations
@@ -45,13 +46,11 @@ from service.storage import (
 
 __all__ = [
     "RULE",
-    "HealthWorker",
     "Scored",
     "change_since_utc_s",
     "health_answer",
     "is_stale",
     "record_holdout",
-    "request_retraining",
     "score_new_samples",
     "series",
 ]
@@ -119,6 +118,16 @@ def _ref_rms_nt(served: Any) -> float:
 
 def _iso_to_utc_s(text: str) -> float:
     return datetime.fromisoformat(text.replace("Z", "+00:00")).timestamp()
+
+
+def _latest(conn: Connection, spacecraft_pk: int, version: int) -> Any:
+    """The newest point of ``version`` (None before any)."""
+    return conn.execute(
+        sa.select(HealthPoint)
+        .where(HealthPoint.spacecraft_pk == spacecraft_pk, HealthPoint.version == version)
+        .order_by(HealthPoint.end_us.desc(), HealthPoint.pk.desc())
+        .limit(1)
+    ).first()
 
 
 def _points(conn: Connection, spacecraft_pk: int, version: int | None = None) -> list[Any]:
@@ -223,14 +232,14 @@ def score_new_samples(
                     HealthPoint.spacecraft_pk == spacecraft_pk
                 )
             ).scalar_one_or_none()
-            mine = _points(conn, spacecraft_pk, served.version)
+            latest = _latest(conn, spacecraft_pk, served.version)
             if last_end_us is not None:
                 start = (last_end_us + 1) / 1e6
             else:  # a version stored before health existed: from the end of its data
                 start = _iso_to_utc_s(served.document["data"]["end"]) + 1e-6
             samples = _new_rows(conn, spacecraft_pk, start, fresh)
         if len(samples) < settings.health_min_samples:
-            return bool(mine and mine[-1].stale)
+            return bool(latest is not None and latest.stale)
         if len(samples) > settings.health_max_samples:
             cut = len(samples) - settings.health_max_samples
             samples = samples.select(np.arange(len(samples)) >= cut)
@@ -238,14 +247,16 @@ def score_new_samples(
             scored = _score(sc, served.document, samples, settings)
         except ValueError as exc:
             log.warning("health: batch not scored", extra={"reason": str(exc)})
-            return bool(mine and mine[-1].stale)
+            return bool(latest is not None and latest.stale)
         ref = _ref_rms_nt(served)
         if not np.isfinite(ref):
             ref = scored.rms_nt
-        was_stale = bool(mine and mine[-1].stale)
-        s = RULE.step(mine[-1].cusum if mine else 0.0, scored.rms_nt, ref)
+        was_stale = bool(latest is not None and latest.stale)
+        s = RULE.step(latest.cusum if latest is not None else 0.0, scored.rms_nt, ref)
         change_us = None
         if not was_stale and RULE.alarm(s):
+            with read_tx(engine) as conn:
+                mine = _points(conn, spacecraft_pk, served.version)
             change_us = _change_at_us(engine, settings, sc, served, mine, scored)
         _insert(
             engine,
@@ -324,22 +335,6 @@ def is_stale(conn: Connection, spacecraft_pk: int, version: int) -> bool:
     )
 
 
-def request_retraining(engine: Engine, settings: Settings, spacecraft_pk: int) -> str | None:
-    """Queue a retraining of a stale spacecraft once ``min_samples`` samples after the change are
-    stored; the id of the job created (None: not yet, or one is already live)."""
-    from service.jobs import create_job
-
-    with read_tx(engine) as conn:
-        since = change_since_utc_s(conn, spacecraft_pk)
-        if since is None:
-            return None
-        n_after = count_samples(conn, spacecraft_pk, start_utc_s=since, include_quarantined=False)
-    if n_after < settings.min_samples:
-        return None
-    job_id, created = create_job(engine, settings, spacecraft_pk, trigger="health")
-    return job_id if created else None
-
-
 def _next_retraining(conn: Connection, settings: Settings, sc: Any, stale: bool) -> float | None:
     """When the next retraining is due [s of UTC]: a live job's creation, or the schedule's next
     slot once enough new samples are stored; None when it waits for data (or no scheduler)."""
@@ -363,27 +358,31 @@ def _next_retraining(conn: Connection, settings: Settings, sc: Any, stale: bool)
 
 
 def health_answer(conn: Connection, settings: Settings, sc: Any) -> dict[str, Any] | None:
-    """The CONTRACT §3 health answer of the calibration in service; None before the first."""
-    from service.deps import iso, iso_or_none
-
+    """The CONTRACT §3 health answer of the calibration in service, times in s of UTC (the
+    route writes them as ISO-8601); None before the first calibration."""
     served = _served(conn, sc.pk)
     if served is None:
         return None
-    mine = _points(conn, sc.pk, served.version)
-    latest = mine[-1] if mine else None
-    alarm = next((p for p in mine if p.change_at_us is not None), None)
+    latest = _latest(conn, sc.pk, served.version)
+    alarm = conn.execute(
+        sa.select(HealthPoint.change_at_us).where(
+            HealthPoint.spacecraft_pk == sc.pk,
+            HealthPoint.version == served.version,
+            HealthPoint.change_at_us.is_not(None),
+        )
+    ).first()
     stale = bool(latest is not None and latest.stale)
     ref = _ref_rms_nt(served)
     return {
         "version": int(served.version),
-        "in_service_since": iso(_promoted_at(conn, sc.pk, served)),
+        "in_service_since": _promoted_at(conn, sc.pk, served),
         "recent_rms_nt": float(latest.rms_nt if latest is not None else ref),
         "noise_nt": float(
             latest.noise_nt if latest is not None and latest.noise_nt is not None else ref
         ),
         "stale": stale,
-        "change_at": None if alarm is None else iso(alarm.change_at_us / 1e6),
-        "next_retraining": iso_or_none(_next_retraining(conn, settings, sc, stale)),
+        "change_at": None if alarm is None else alarm.change_at_us / 1e6,
+        "next_retraining": _next_retraining(conn, settings, sc, stale),
     }
 
 
@@ -399,9 +398,7 @@ def _promoted_at(conn: Connection, spacecraft_pk: int, served: Any) -> float:
 
 
 def series(conn: Connection, spacecraft_pk: int, *, limit: int = 2000) -> list[dict[str, Any]]:
-    """The health series, oldest first (the newest ``limit`` points)."""
-    from service.deps import iso
-
+    """The health series, oldest first (the newest ``limit`` points); times in s of UTC."""
     rows = conn.execute(
         sa.select(HealthPoint)
         .where(HealthPoint.spacecraft_pk == spacecraft_pk)
@@ -412,72 +409,16 @@ def series(conn: Connection, spacecraft_pk: int, *, limit: int = 2000) -> list[d
         {
             "version": p.version,
             "kind": p.kind,
-            "start": iso(p.start_us / 1e6),
-            "end": iso(p.end_us / 1e6),
+            "start": p.start_us / 1e6,
+            "end": p.end_us / 1e6,
             "n": p.n,
             "rms_nt": p.rms_nt,
             "noise_nt": p.noise_nt,
             "ref_rms_nt": p.ref_rms_nt,
             "cusum": p.cusum,
             "stale": p.stale,
-            "change_at": None if p.change_at_us is None else iso(p.change_at_us / 1e6),
-            "scored_at": iso(p.created_at),
+            "change_at": None if p.change_at_us is None else p.change_at_us / 1e6,
+            "scored_at": p.created_at,
         }
         for p in reversed(rows)
     ]
-
-
-class HealthWorker:
-    """Scores uploads in one background thread, per spacecraft in order, coalescing uploads that
-    arrive while a scoring of that spacecraft waits (it reads every new sample anyway).
-
-    ``submit(pk)`` after an upload's commit; ``wait(pk)`` before answering what the health of
-    ``pk`` is. A stale calibration's retraining is queued on ``runner``.
-    """
-
-    def __init__(self, engine: Engine, settings: Settings, runner: Any) -> None:
-        from concurrent.futures import ThreadPoolExecutor
-
-        self.engine = engine
-        self.settings = settings
-        self.runner = runner
-        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="orbitcal-health")
-        self._guard = threading.Lock()
-        self._waiting: dict[int, Any] = {}  # pk -> the upload's rows in memory, or None
-        self._last: dict[int, Any] = {}
-
-    def submit(self, spacecraft_pk: int, fresh: Any = None) -> None:
-        """Score after an upload; ``fresh``: its telemetry when every row of it was new."""
-        with self._guard:
-            if spacecraft_pk in self._waiting:
-                # a scoring not yet started reads this upload's samples too, from the database
-                self._waiting[spacecraft_pk] = None
-                return
-            self._waiting[spacecraft_pk] = fresh
-            self._last[spacecraft_pk] = self._pool.submit(self._run, spacecraft_pk)
-
-    def wait(self, spacecraft_pk: int, timeout_s: float = 60.0) -> None:
-        """Until the scoring of ``spacecraft_pk`` submitted so far is done (bounded)."""
-        with self._guard:
-            future = self._last.get(spacecraft_pk)
-        if future is not None:
-            from concurrent.futures import TimeoutError as FutureTimeout
-
-            try:
-                future.result(timeout=timeout_s)
-            except FutureTimeout:
-                log.warning("health: scoring still running", extra={"pk": spacecraft_pk})
-
-    def _run(self, spacecraft_pk: int) -> None:
-        with self._guard:
-            fresh = self._waiting.pop(spacecraft_pk, None)
-        try:
-            if score_new_samples(self.engine, self.settings, spacecraft_pk, fresh=fresh):
-                job_id = request_retraining(self.engine, self.settings, spacecraft_pk)
-                if job_id is not None:
-                    self.runner.submit(job_id)
-        except Exception:  # the upload is stored; the next one scores its samples too
-            log.exception("health check after upload failed")
-
-    def shutdown(self) -> None:
-        self._pool.shutdown(wait=True, cancel_futures=True)

@@ -24,7 +24,7 @@ from service.diagnosis_cache import DiagnosisCache
 if TYPE_CHECKING:
     from sqlalchemy.engine import Engine
 
-    from service.health import HealthWorker
+    from service.health_worker import HealthWorker
     from service.jobs import JobRunner
     from service.metrics import Metrics
     from service.ratelimit import Buckets

@@ -11,7 +11,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, HTTPException, Query, Request
 
 from service.auth import Principal, require_scope
-from service.deps import EngineDep, SettingsDep, get_spacecraft
+from service.deps import EngineDep, SettingsDep, get_spacecraft, iso_or_none
 from service.health import health_answer, series
 from service.schemas import ErrorPublic, HealthPointPublic, HealthPublic
 from service.storage import read_tx
@@ -47,6 +47,8 @@ def health(
         answer = health_answer(conn, settings, sc)
     if answer is None:
         raise HTTPException(status_code=404, detail=f"{spacecraft_id!r} has no calibration yet")
+    for key in ("in_service_since", "change_at", "next_retraining"):
+        answer[key] = iso_or_none(answer[key])
     return HealthPublic(**answer)
 
 
@@ -67,4 +69,8 @@ def health_series(
     request.app.state.health.wait(pk)
     with read_tx(engine) as conn:
         sc = get_spacecraft(conn, spacecraft_id)
-        return [HealthPointPublic(**p) for p in series(conn, sc.pk, limit=limit)]
+        points = series(conn, sc.pk, limit=limit)
+    for p in points:
+        for key in ("start", "end", "change_at", "scored_at"):
+            p[key] = iso_or_none(p[key])
+    return [HealthPointPublic(**p) for p in points]
