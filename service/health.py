@@ -337,7 +337,8 @@ def is_stale(conn: Connection, spacecraft_pk: int, version: int) -> bool:
 
 def _next_retraining(conn: Connection, settings: Settings, sc: Any, stale: bool) -> float | None:
     """When the next retraining is due [s of UTC]: a live job's creation, or the schedule's next
-    slot once enough new samples are stored; None when it waits for data (or no scheduler)."""
+    slot once enough new samples are stored; None when it waits for data (a stale calibration:
+    for ``min_samples`` samples after the change) or no scheduler runs."""
     from service.params import Schedule
 
     live = conn.execute(
@@ -347,12 +348,14 @@ def _next_retraining(conn: Connection, settings: Settings, sc: Any, stale: bool)
     ).scalar_one_or_none()
     if live is not None:
         return float(live)
+    if stale:  # queued by the next upload once min_samples samples after the change are stored
+        return None
     if not settings.scheduler:
         return None
     plan = Schedule.from_stored(sc.schedule, spacecraft=sc.pk)
     cadence = settings.cadence_s if plan.cadence_s is None else plan.cadence_s
     min_new = settings.min_new_samples if plan.min_new_samples is None else plan.min_new_samples
-    if not stale and sc.sample_count - sc.samples_at_last_job < min_new:
+    if sc.sample_count - sc.samples_at_last_job < min_new:
         return None
     return max(time.time(), (sc.last_job_at or 0.0) + cadence)
 
