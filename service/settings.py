@@ -81,8 +81,8 @@ class Settings(BaseSettings):
     min_samples: int = 200  # a fit needs at least this many samples in the window
     #: Calibration health (service/health.py): new samples are scored in batches of at least
     #: this many; at most the newest ``health_max_samples`` of a batch are scored.
-    health_min_samples: int = 60
-    health_max_samples: int = 20000
+    health_min_samples: int = Field(default=60, ge=8)  # the noise floor needs a few samples
+    health_max_samples: int = Field(default=20000, ge=8)
     min_new_samples: int = 500  # scheduled retraining waits for this many new samples
     cadence_s: float = 3600.0  # per-spacecraft scheduled retraining cadence [s]
     scheduler_tick_s: float = 10.0  # how often the scheduler looks for due spacecraft [s]
