@@ -23,6 +23,7 @@ from uvicorn.middleware.proxy_headers import ProxyHeadersMiddleware
 import orbitcal
 from service.auth import is_loopback
 from service.handlers import add_exception_handlers
+from service.health_worker import HealthWorker
 from service.http import HeaderCount
 from service.jobs import FitFunction, InlineRunner, JobRunner, recover_interrupted
 from service.logs import configure_logging, redact_url
@@ -33,6 +34,7 @@ from service.routes import (
     calibrations,
     dashboard,
     exports,
+    health,
     jobs,
     keys,
     ops,
@@ -160,12 +162,14 @@ def make_lifespan(
         scheduler = FleetScheduler(engine, settings, job_runner)
         if settings.scheduler and leader is not None:
             scheduler.start()
+        health_worker = HealthWorker(engine, settings, job_runner)
         state.open(
             engine=engine,
             metrics=state.metrics,
             runner=job_runner,
             scheduler=scheduler,
             leader=leader is not None,
+            health=health_worker,
         )
         log.info(
             "service started",
@@ -180,6 +184,7 @@ def make_lifespan(
             yield
         finally:
             state.diagnoses.shutdown()
+            health_worker.shutdown()
             scheduler.shutdown()
             job_runner.shutdown()
             engine.dispose()
@@ -251,7 +256,8 @@ def add_middleware(app: FastAPI, settings: Settings, state: ServiceState) -> Non
 
 
 def include_routes(app: FastAPI) -> None:
-    for module in (ops, spacecraft, telemetry, quarantine, calibrations, jobs, keys, dashboard):
+    modules = (ops, spacecraft, telemetry, quarantine, calibrations, health, jobs, keys, dashboard)
+    for module in modules:
         app.include_router(module.router)
     app.include_router(exports.router)  # issue 21: /calibrations/{version}[?format=F]
 

@@ -164,6 +164,7 @@ def _read_inputs(
                 Calibration.spacecraft_pk == sc.pk, Calibration.status == "in_service"
             )
         ).first()
+        window, samples = _after_change(conn, sc.pk, window, samples)
     rows = training_rows(
         window,
         samples.t_utc_s,
@@ -179,6 +180,27 @@ def _read_inputs(
         spacecraft=sc.id,
     )
     return samples.select(rows.mask).to_telemetry(), rows, window, champion
+
+
+def _after_change(conn: Any, spacecraft_pk: int, window: Any, samples: Any) -> tuple[Any, Any]:
+    """The window cut at the latest change the health check found (service.health): a
+    retraining never mixes data from before a sensor change with data after it."""
+    from orbitcal.pipeline import Window
+    from service.health import change_since_utc_s
+
+    since = change_since_utc_s(conn, spacecraft_pk)
+    if since is None or window.start_utc_s is None or window.start_utc_s >= since:
+        return window, samples
+    keep = samples.t_utc_s >= since
+    n_before = int(np.count_nonzero(~keep))
+    if not n_before:
+        return window, samples
+    excluded = {**window.excluded, "before_change": n_before}
+    if not keep.any():
+        return Window(None, None, 0, excluded), samples.select(keep)
+    return Window(since, window.end_utc_s, int(np.count_nonzero(keep)), excluded), samples.select(
+        keep
+    )
 
 
 def _retrain(
@@ -249,9 +271,22 @@ def _retrain(
                 provenance=provenance,
             )
         )
+    from service.health import is_stale, record_holdout
     from service.yamcs_hook import push_after_promotion  # issue 21
 
-    pushed = push_after_promotion(settings, document) if decision.promote else None
+    pushed = None
+    if decision.promote:
+        record_holdout(
+            engine,
+            settings,
+            sc.pk,
+            version=version,
+            start_utc_s=outcome.holdout_start_utc_s,
+            end_utc_s=outcome.holdout_end_utc_s,
+        )
+        with read_tx(engine) as conn:
+            stale = is_stale(conn, sc.pk, version)
+        pushed = push_after_promotion(settings, document, stale=stale)
     return {
         "yamcs_push": pushed,
         "version": version,

@@ -18,7 +18,7 @@ from prometheus_client.metrics_core import Metric
 from prometheus_client.registry import Collector
 from sqlalchemy.engine import Engine
 
-from service.storage import Calibration, Job, Spacecraft, read_tx
+from service.storage import Calibration, HealthPoint, Job, Spacecraft, read_tx
 
 __all__ = ["Metrics"]
 
@@ -46,8 +46,10 @@ class _DatabaseCollector(Collector):
         samples = GaugeMetricFamily(
             "orbitcal_samples_stored", "Samples stored", labels=["spacecraft"]
         )
+        health = _HealthGauges()
         try:
             with read_tx(self.engine) as conn:
+                health.read(conn)
                 counts = dict(
                     conn.execute(sa.select(Job.status, sa.func.count()).group_by(Job.status)).all()
                 )
@@ -84,9 +86,68 @@ class _DatabaseCollector(Collector):
         except sa.exc.SQLAlchemyError:
             return
         yield queue
+        yield from health.families()
         yield rms
         yield last
         yield samples
+
+
+class _HealthGauges:
+    """The calibration-health gauges per spacecraft (service.health): the newest scored batch of
+    the version in service."""
+
+    def __init__(self) -> None:
+        def gauge(name: str, doc: str) -> GaugeMetricFamily:
+            return GaugeMetricFamily(name, doc, labels=["spacecraft"])
+
+        self.recent = gauge(
+            "orbitcal_health_recent_rms_nt",
+            "RMS of the calibration in service on the newest scored batch [nT]",
+        )
+        self.noise = gauge(
+            "orbitcal_health_noise_nt", "White-noise floor of the newest scored batch [nT]"
+        )
+        self.cusum = gauge(
+            "orbitcal_health_cusum", "The change rule's CUSUM (stale from ln 4 = 1.386 on)"
+        )
+        self.stale = gauge(
+            "orbitcal_health_stale", "1 when the calibration in service is stale, else 0"
+        )
+
+    def read(self, conn: Any) -> None:
+        newest = (
+            sa.select(HealthPoint.spacecraft_pk, sa.func.max(HealthPoint.pk).label("pk"))
+            .join(
+                Calibration,
+                sa.and_(
+                    Calibration.spacecraft_pk == HealthPoint.spacecraft_pk,
+                    Calibration.version == HealthPoint.version,
+                    Calibration.status == "in_service",
+                ),
+            )
+            .group_by(HealthPoint.spacecraft_pk)
+            .subquery()
+        )
+        rows = conn.execute(
+            sa.select(
+                Spacecraft.id,
+                HealthPoint.rms_nt,
+                HealthPoint.noise_nt,
+                HealthPoint.cusum,
+                HealthPoint.stale,
+            )
+            .join(HealthPoint, HealthPoint.spacecraft_pk == Spacecraft.pk)
+            .join(newest, newest.c.pk == HealthPoint.pk)
+        ).all()
+        for sc, rms, noise, cusum, stale in rows:
+            self.recent.add_metric([sc], float(rms))
+            if noise is not None:
+                self.noise.add_metric([sc], float(noise))
+            self.cusum.add_metric([sc], float(cusum))
+            self.stale.add_metric([sc], 1.0 if stale else 0.0)
+
+    def families(self) -> Iterator[GaugeMetricFamily]:
+        yield from (self.recent, self.noise, self.cusum, self.stale)
 
 
 class Metrics:

@@ -23,6 +23,8 @@ __all__ = [
     "CalibrationVersionPublic",
     "ErrorItem",
     "ErrorPublic",
+    "HealthPointPublic",
+    "HealthPublic",
     "IngestResult",
     "JobAccepted",
     "JobPublic",
@@ -218,3 +220,39 @@ class ApiKeyPublic(BaseModel):
     scopes: list[str]
     created_at: str
     revoked: bool
+
+
+class HealthPublic(BaseModel):
+    """CONTRACT section 3: the calibration in service against the newest data."""
+
+    version: int
+    in_service_since: str = Field(description="ISO-8601 UTC: when this version went into service")
+    recent_rms_nt: float = Field(
+        description="RMS [nT] over the N x 3 residual of the newest scored batch (CONTRACT "
+        "Definitions); the version's held-out RMS until a batch arrives"
+    )
+    noise_nt: float = Field(
+        description="white-noise floor [nT] of that batch's residual (second differences)"
+    )
+    stale: bool = Field(description="the change rule (docs/design.md) found the error grown")
+    change_at: str | None = Field(description="ISO-8601 UTC: when the change began; null if none")
+    next_retraining: str | None = Field(
+        description="ISO-8601 UTC: when the next retraining is due; null while it waits for data"
+    )
+
+
+class HealthPointPublic(BaseModel):
+    """One scored batch of the health series."""
+
+    version: int
+    kind: Literal["new", "holdout"]
+    start: str
+    end: str
+    n: int
+    rms_nt: float
+    noise_nt: float | None
+    ref_rms_nt: float = Field(description="the version's held-out RMS the rule compares with [nT]")
+    cusum: float = Field(description="the change rule's CUSUM S_k [ln]; stale from ln 4 on")
+    stale: bool
+    change_at: str | None
+    scored_at: str = Field(description="ISO-8601 UTC (wall clock): when the service scored it")

@@ -74,9 +74,15 @@ class Settings(BaseSettings):
     #: Retraining defaults.
     method: str = "linear"
     reference_field: str = "IGRF-14"
-    holdout_fraction: float = 0.2
+    #: The share held out for ``holdout_rms_nt``: one default on every surface (CLI, library,
+    #: service), ``orbitcal.calibrate.holdout.HOLDOUT_FRACTION``.
+    holdout_fraction: float = 0.25
     window_s: float = 86400.0  # sliding window of the most recent data [s]
     min_samples: int = 200  # a fit needs at least this many samples in the window
+    #: Calibration health (service/health.py): new samples are scored in batches of at least
+    #: this many; at most the newest ``health_max_samples`` of a batch are scored.
+    health_min_samples: int = Field(default=60, ge=8)  # the noise floor needs a few samples
+    health_max_samples: int = Field(default=20000, ge=8)
     min_new_samples: int = 500  # scheduled retraining waits for this many new samples
     cadence_s: float = 3600.0  # per-spacecraft scheduled retraining cadence [s]
     scheduler_tick_s: float = 10.0  # how often the scheduler looks for due spacecraft [s]

@@ -24,6 +24,7 @@ from service.diagnosis_cache import DiagnosisCache
 if TYPE_CHECKING:
     from sqlalchemy.engine import Engine
 
+    from service.health_worker import HealthWorker
     from service.jobs import JobRunner
     from service.metrics import Metrics
     from service.ratelimit import Buckets
@@ -56,6 +57,8 @@ class ServiceState(State):
     runner: JobRunner
     scheduler: FleetScheduler
     leader: bool
+    #: scores each upload's new samples against the calibration in service (service.health)
+    health: HealthWorker
 
     @classmethod
     def new(
@@ -80,8 +83,10 @@ class ServiceState(State):
         runner: JobRunner,
         scheduler: FleetScheduler,
         leader: bool,
+        health: HealthWorker,
     ) -> None:
         """Record what the lifespan opened (and start the diagnoses' one-thread pool)."""
+        self.health = health
         self.engine = engine
         self.metrics = metrics
         self.runner = runner

@@ -37,6 +37,7 @@ __all__ = [
     "Calibration",
     "CommitOutcomeUnknown",
     "DataAudit",
+    "HealthPoint",
     "IngestLog",
     "Job",
     "Quarantine",
@@ -209,6 +210,37 @@ class DataAudit(Base):
     at: Mapped[float] = mapped_column(sa.Float, nullable=False)
     quarantine_pk: Mapped[int | None] = mapped_column(sa.Integer)
     reason: Mapped[str | None] = mapped_column(sa.Text)
+
+
+class HealthPoint(Base):
+    """One scored batch of a spacecraft's new samples against a calibration (service.health)."""
+
+    __tablename__ = "health_points"
+    __table_args__ = (
+        sa.UniqueConstraint("spacecraft_pk", "start_us", "version", "kind"),
+        sa.Index("ix_health_points_sc_end", "spacecraft_pk", "end_us"),
+    )
+
+    pk: Mapped[int] = mapped_column(sa.Integer, primary_key=True, autoincrement=True)
+    spacecraft_pk: Mapped[int] = mapped_column(
+        sa.Integer, sa.ForeignKey("spacecraft.pk", ondelete="CASCADE"), nullable=False
+    )
+    #: the calibration version scored
+    version: Mapped[int] = mapped_column(sa.Integer, nullable=False)
+    #: ``new`` (an upload's new samples) | ``holdout`` (the version's own held-out block)
+    kind: Mapped[str] = mapped_column(sa.String(16), nullable=False)
+    start_us: Mapped[int] = mapped_column(sa.BigInteger, nullable=False)  # UTC µs of the batch
+    end_us: Mapped[int] = mapped_column(sa.BigInteger, nullable=False)
+    n: Mapped[int] = mapped_column(sa.BigInteger, nullable=False)
+    rms_nt: Mapped[float] = mapped_column(sa.Float, nullable=False)
+    noise_nt: Mapped[float | None] = mapped_column(sa.Float, nullable=True)
+    #: the version's held-out RMS the rule compares with
+    ref_rms_nt: Mapped[float] = mapped_column(sa.Float, nullable=False)
+    cusum: Mapped[float] = mapped_column(sa.Float, nullable=False)
+    stale: Mapped[bool] = mapped_column(sa.Boolean, nullable=False)
+    #: on the point that raised the alarm: when the change began [UTC µs]
+    change_at_us: Mapped[int | None] = mapped_column(sa.BigInteger, nullable=True)
+    created_at: Mapped[float] = mapped_column(sa.Float, nullable=False)
 
 
 class ApiKey(Base):

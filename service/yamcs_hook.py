@@ -1,6 +1,7 @@
 """The ``yamcs-push`` scheduler hook (issue 21): after a promotion, set the new calibration's
 coefficients on a running Yamcs when ``ORBITCAL_YAMCS_PUSH_URL`` is configured.
 
+A calibration the health check found stale (service/health.py) is never pushed.
 A failed push never fails the retraining (the calibration is in service either way): it is
 logged and reported in the job's result under ``yamcs_push`` with its reason.
 """
@@ -19,14 +20,18 @@ log = logging.getLogger("orbitcal.service.yamcs")
 
 
 def push_after_promotion(
-    settings: Settings, document: dict[str, Any], *, transport: Any = None
+    settings: Settings, document: dict[str, Any], *, transport: Any = None, stale: bool = False
 ) -> dict[str, Any] | None:
     """Push ``document`` (just promoted) to the configured Yamcs; ``None`` when none is.
 
-    Returns the export's report (what was set), or ``{"error": reason}``.
+    Returns the export's report (what was set), or ``{"error": reason}``; a ``stale`` document
+    is not pushed (``{"skipped": reason}``).
     """
     if not settings.yamcs_push_url:
         return None
+    if stale:
+        log.warning("yamcs push skipped: stale", extra={"version": document.get("version")})
+        return {"skipped": "the calibration is stale (the health check found a change)"}
     from orbitcal.export import ExportOptions, YamcsTarget, export
 
     target = YamcsTarget(

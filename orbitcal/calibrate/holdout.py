@@ -2,6 +2,15 @@
 
 Random rows would leak slowly varying effects (temperature, drifts, orbit-periodic fields) between
 the fit and the score.
+
+**The held-out RMS, defined once** (a calibration document's ``metrics.holdout_rms_nt``, what
+``orbitcal calibrate`` prints, the service's versions and dashboard): the calibration is fitted
+on the earlier samples of the table (after the service's row selection: window, quarantine,
+quiet time, gross outliers) and scored on the latest :data:`HOLDOUT_FRACTION` of them in time
+(:func:`later_block_split`) with :func:`orbitcal.metrics.rms_nt` (the N × 3 RMS of CONTRACT
+"Definitions"; scalar methods: ``scalar_rms_nt``). Every surface holds out this share unless told
+otherwise, so the same table and method give the same number everywhere; a surface that holds
+out otherwise (the diagnosis: its last 3 of 10 equal-duration blocks) names its figure as its own.
 """
 
 from __future__ import annotations
@@ -11,7 +20,10 @@ from numpy.typing import NDArray
 
 from orbitcal.errors import BadInputError
 
-__all__ = ["later_block_split", "rms_nt"]
+__all__ = ["HOLDOUT_FRACTION", "later_block_split", "rms_nt"]
+
+#: The share of the latest samples held out by default on every surface (CLI, library, service).
+HOLDOUT_FRACTION = 0.25
 
 
 def later_block_split(

@@ -24,7 +24,7 @@ from orbitcal.calibrate import (
 )
 from orbitcal.calibrate.document import calibration_to_document
 from orbitcal.calibrate.errors import TooFewSamplesError, UnknownMethodError
-from orbitcal.calibrate.holdout import later_block_split
+from orbitcal.calibrate.holdout import HOLDOUT_FRACTION, later_block_split
 from orbitcal.pipeline.determination import UndeterminedError, undetermined_reason
 from orbitcal.pipeline.inputs import fit_data_for_telemetry
 from orbitcal.pipeline.scores import Scores, score
@@ -114,7 +114,7 @@ class CalibrateOptions:
     #: ``"GCRS"`` or ``"ITRS"``: the frame of the table's quaternions.
     attitude_frame: str = "GCRS"
     #: Share of the latest samples held out for ``metrics.holdout_rms_nt`` [-].
-    holdout_fraction: float = 0.25
+    holdout_fraction: float = HOLDOUT_FRACTION
     #: Written into the document (the service fills its own).
     spacecraft: str = ""
     version: int = 1
@@ -211,6 +211,7 @@ def calibrate(
         vector=spec.vector,
         holdout_fraction=holdout_fraction,
     )
+    metrics["holdout_noise_nt"] = _noise_nt(cal, data.subset(hold if np.any(hold) else train))
     document = calibration_to_document(
         cal,
         spacecraft=opts.spacecraft,
@@ -246,6 +247,17 @@ def _checked_method(method: str, telemetry: Telemetry) -> MethodSpec:
     if spec.vector and telemetry.q_wxyz is None:
         raise MissingAttitudeError(method)
     return spec
+
+
+def _noise_nt(cal: Calibration, data: FitData) -> float:
+    """White-noise floor of the residual on ``data`` per component [nT]
+    (:func:`orbitcal.diagnose.noise.noise_floor_nt`: second differences, which slow errors
+    cancel in): what the held-out RMS is compared with. NaN for too few samples."""
+    from orbitcal.diagnose.noise import noise_floor_nt
+    from orbitcal.pipeline.scores import residuals
+
+    _b, vec, scalar = residuals(cal, data)
+    return noise_floor_nt(vec if vec is not None else np.asarray(scalar)[:, None])
 
 
 def _run_metrics(

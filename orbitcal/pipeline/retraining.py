@@ -12,7 +12,7 @@ import numpy as np
 
 from orbitcal.arrays import FloatArray
 from orbitcal.calibrate import METHODS, AffineCalibration, Calibration, FitData
-from orbitcal.calibrate.holdout import later_block_split
+from orbitcal.calibrate.holdout import HOLDOUT_FRACTION, later_block_split
 from orbitcal.errors import NotEnoughDataError
 from orbitcal.metrics import primary_key
 from orbitcal.pipeline.determination import undetermined_reason
@@ -57,7 +57,7 @@ class RetrainOptions:
     #: The frame of the table's quaternions (``"GCRS"`` or ``"ITRS"``).
     attitude_frame: str = "GCRS"
     #: Share of the latest samples held out to compare calibrations on [-].
-    holdout_fraction: float = 0.2
+    holdout_fraction: float = HOLDOUT_FRACTION
     #: Margin, significance and chunks of the promotion rule.
     rule: PromotionRule = dataclass_field(default_factory=PromotionRule)
 

@@ -148,6 +148,7 @@ EXCLUSION_REASONS: dict[str, str] = {
     "no_position": "without position (r_x..r_z) and no orbit set",
     "storm": "storm time (Kp or Dst beyond the quiet-time thresholds)",
     "outlier": "gross outliers (raw |B| far from the reference |B|)",
+    "before_change": "before the change the health check found (orbitcal.health)",
 }
 
 

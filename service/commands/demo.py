@@ -284,6 +284,59 @@ def _print_versions(
     return final
 
 
+def _iso_s(text: str) -> float:
+    from datetime import datetime
+
+    return datetime.fromisoformat(text.replace("Z", "+00:00")).timestamp()
+
+
+def _print_health(
+    series: list[dict[str, Any]], versions: list[dict[str, Any]], demo: DemoWorld
+) -> None:
+    """The health timeline: when the sensor changed, when the service found the version in
+    service stale, when the retrained version went into service, the error on new data."""
+    from orbitcal.timescales import utc_s_to_iso
+
+    alarm = next((p for p in series if p["change_at"]), None)
+    print("  calibration health (each upload's new samples scored against the version in service):")
+    print(f"    sensor changed (simulation)  {utc_s_to_iso([demo.t_change_utc_s])[0][:19]}Z")
+    if alarm is None:
+        print("    no change found")
+        return
+    stale_v = alarm["version"]
+    print(
+        f"    version {stale_v} marked stale   by the upload of samples {alarm['start'][:19]}Z.."
+        f"{alarm['end'][11:19]}Z: {alarm['rms_nt']:.1f} nT on them, {alarm['ref_rms_nt']:.2f} nT "
+        f"held out; the change began at {alarm['change_at'][:19]}Z "
+        f"({_iso_s(alarm['change_at']) - demo.t_change_utc_s:+.0f} s from the truth)"
+    )
+    after = [v for v in versions if v["version"] > stale_v and v["status"] != "rejected"]
+    if after:
+        first = min(after, key=lambda v: v["version"])
+        wall = _iso_s(first["created_at"]) - _iso_s(alarm["scored_at"])
+        print(
+            f"    version {first['version']} in service     fitted on data from "
+            f"{first['provenance']['data']['start'][:19]}Z to "
+            f"{first['provenance']['data']['end'][:19]}Z "
+            f"(after the change only), {wall:.1f} s (wall clock) after the alarm"
+        )
+    before = [
+        p["rms_nt"]
+        for p in series
+        if p["kind"] == "new" and not p["stale"] and p["version"] == stale_v
+    ]
+    stale = [p["rms_nt"] for p in series if p["stale"]]
+    later = [p["rms_nt"] for p in series if p["kind"] == "new" and p["version"] > stale_v]
+    if before and stale:
+        print(
+            f"    error on new data            before the change "
+            f"{min(before):.2f}-{max(before):.2f} nT; "
+            f"version {stale_v} stale {min(stale):.0f}-{max(stale):.0f} nT"
+            + (f"; after {min(later):.2f}-{max(later):.2f} nT" if later else "")
+        )
+    print()
+
+
 def _print_where_to_look(url: str, admin_key: str, db: Path, sc: str) -> None:
     """Links a browser opens as they are, and curl lines for the routes that need the key (a
     browser cannot send the X-API-Key header)."""
@@ -332,10 +385,12 @@ def run(args: argparse.Namespace) -> int:
             _wait_for_the_last_data(c, sc, demo)
             versions = c.get(f"/v1/spacecraft/{sc}/calibrations").json()
             served = c.get(f"/v1/spacecraft/{sc}/calibration").json()
+            series = c.get(f"/v1/spacecraft/{sc}/health/series", params={"limit": 100000}).json()
     except BaseException:
         service.stop()
         raise
     final = _print_versions(versions, served, demo)
+    _print_health(series, versions, demo)
     code = 0 if final < 10.0 else 1
     if not args.keep_serving:
         service.stop()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import time
 from typing import Annotated, Any, Literal, cast
 
@@ -24,6 +25,8 @@ from service.schemas import ErrorPublic, IngestResult
 from service.storage import insert_samples, log_upload, read_tx, write_tx
 
 __all__ = ["router"]
+
+log = logging.getLogger("orbitcal.service.telemetry")
 
 router = APIRouter(prefix="/v1/spacecraft", tags=["telemetry"])
 
@@ -136,6 +139,8 @@ async def ingest_telemetry(
                 accepted += insert_samples(conn, sc.pk, rows)
             duplicates = len(parsed.telemetry) - accepted
             log_upload(conn, sc.pk, fmt=fmt, accepted=accepted, duplicates=duplicates, rejected=bad)
+        if accepted:
+            _check_health(request, sc.pk, parsed.telemetry if not duplicates else None)
         head = {"accepted": accepted, "duplicates": duplicates}
         return 200, _result_json(head, parsed.rejected), accepted, duplicates, n_rejected
 
@@ -147,6 +152,16 @@ async def ingest_telemetry(
     if status == 200:
         metrics.ingest_seconds.labels(fmt).observe(time.perf_counter() - started)
     return Response(payload, status_code=status, media_type="application/json")
+
+
+def _check_health(request: Request, spacecraft_pk: int, fresh: Any) -> None:
+    """After the commit: the new samples go to the health worker (service.health), which scores
+    them against the calibration in service off the request path and queues a retraining when it
+    is stale. Never fails the upload (its rows are stored)."""
+    try:
+        request.app.state.health.submit(spacecraft_pk, fresh)
+    except Exception:  # the upload is committed; health catches up on the next one
+        log.exception("health check after upload failed")
 
 
 def _upload_format(request: Request) -> str:

@@ -369,7 +369,7 @@ def test_dashboard_in_chromium(fleet: Fleet, tmp_path: Path) -> None:
         browser.wait_for("document.body.dataset.ready === 'empty-sat'")
         assert browser.evaluate("document.getElementById('error-banner').hidden")
         for section, text in (
-            ("cal-empty", "No calibration in service yet"),
+            ("health-line", "No calibration in service yet"),
             ("residual-empty", "No calibration in service"),
             ("versions-caption", "No calibration version yet"),
             ("samples-caption", "No samples stored yet"),
@@ -380,7 +380,13 @@ def test_dashboard_in_chromium(fleet: Fleet, tmp_path: Path) -> None:
             shown = browser.evaluate(f"document.getElementById('{section}').innerText")
             assert shown.startswith(text), (section, shown)
         # nothing left over from the spacecraft shown before: no plot, no empty table
-        for name in ("plot-residual", "plot-versions", "plot-samples", "plot-rejected"):
+        for name in (
+            "plot-health",
+            "plot-residual",
+            "plot-versions",
+            "plot-samples",
+            "plot-rejected",
+        ):
             display = browser.evaluate(
                 f"getComputedStyle(document.getElementById('{name}')).display"
             )
@@ -404,6 +410,17 @@ def test_dashboard_in_chromium(fleet: Fleet, tmp_path: Path) -> None:
             "No diagnosis yet"
         )
         browser.screenshot(tmp_path / "dashboard-no-diagnosis.png")
+        # the first screen: the health line on top, internals one click away (closed)
+        line = browser.evaluate("document.getElementById('health-line').innerText")
+        assert line.startswith(f"Version {doc['version']}, in service since "), line
+        assert "the noise of" in line and "healthy" in line, line
+        assert (
+            browser.evaluate("document.getElementById('health-line').getBoundingClientRect().top")
+            < 400
+        )
+        assert not browser.evaluate("document.getElementById('internals').open")
+        browser.evaluate("document.querySelector('#internals > summary').click()")
+        assert browser.evaluate("document.getElementById('internals').open")
 
         # calibration tables: the document's numbers, formatted
         summary = dict(_table(browser, "#cal-summary"))
@@ -540,7 +557,7 @@ def test_dashboard_with_authentication_off(tmp_path: Path) -> None:
                 "({banner: document.getElementById('error-banner').hidden,"
                 " notice: document.getElementById('notice').hidden,"
                 " key: document.getElementById('key-state').innerText,"
-                " cal: document.getElementById('cal-empty').innerText,"
+                " cal: document.getElementById('health-line').innerText,"
                 " samples: document.getElementById('samples-caption').innerText})"
             )
             shot = browser.screenshot(tmp_path / "dashboard-auth-off.png")
@@ -557,3 +574,102 @@ def test_dashboard_with_authentication_off(tmp_path: Path) -> None:
         "samples": "300 samples stored over 1 day(s)",
     }
     assert external == []
+
+
+def _hang_api_calls(browser: Browser) -> str:
+    """Make every API call of the next page loads hang: the page shows its loading state."""
+    answer = browser.page(
+        "Page.addScriptToEvaluateOnNewDocument",
+        source="window.fetch = () => new Promise(() => {});",
+    )
+    return str(answer["identifier"])
+
+
+@pytest.mark.browser
+@pytest.mark.timeout(300)
+def test_dashboard_health_first_screen(tmp_path: Path) -> None:
+    """The loading state (no empty panel while the data load); a stale calibration leads the
+    first screen in red with when the change began; after the retraining on post-change data
+    the line is green again and the plots show both versions, v1's error on the newest data
+    beside its held-out RMS."""
+    from service_worlds import SENSOR_A, SENSOR_B
+
+    t = T0_UTC_S
+    with live_server(sqlite_settings(tmp_path, window_s=2 * 86400.0)) as server:
+        with server.client() as c:
+            assert c.post("/v1/spacecraft", json={"id": "sc", "tle": SWARM_A_TLE}).is_success
+            df, _ = world(t, 4320, sensor=SENSOR_A, seed=1, positions=False)
+            c.post("/v1/spacecraft/sc/telemetry", content=_parquet(df), headers=_PQ)
+            t += 43200.0
+            job = wait_job(c, c.post("/v1/spacecraft/sc/calibrations").json()["job_id"])
+            assert job["status"] == "succeeded"
+            for k in range(3):
+                df, _ = world(t, 360, sensor=SENSOR_A, seed=10 + k, positions=False)
+                c.post("/v1/spacecraft/sc/telemetry", content=_parquet(df), headers=_PQ)
+                t += 3600.0
+            # the change, with too few samples after it for a retraining yet (100 < 200)
+            a, _ = world(t, 130, sensor=SENSOR_A, seed=20, positions=False)
+            b, _ = world(t + 1300.0, 100, sensor=SENSOR_B, seed=21, positions=False)
+            body = _parquet(pd.concat([a, b], ignore_index=True))
+            c.post("/v1/spacecraft/sc/telemetry", content=body, headers=_PQ)
+            t += 2300.0
+            assert c.get("/v1/spacecraft/sc/health").json()["stale"]
+        with Browser(height=900) as browser:
+            script = _hang_api_calls(browser)
+            browser.navigate(server.url + f"/dashboard#key={ADMIN_KEY}&sc=sc")
+            browser.wait_for("document.readyState === 'complete'")
+            loading = browser.evaluate(
+                "({loading: getComputedStyle(document.getElementById('loading')).display,"
+                " text: document.getElementById('loading').innerText,"
+                " detail: getComputedStyle(document.getElementById('detail')).display,"
+                " table: document.querySelector('#spacecraft tbody').innerText})"
+            )
+            loading_shot = browser.screenshot(tmp_path / "dashboard-loading.png")
+            browser.page("Page.removeScriptToEvaluateOnNewDocument", identifier=script)
+            browser.evaluate("location.reload()")
+            assert browser.wait_for("document.body.dataset.ready") == "sc"
+            stale_line = browser.evaluate("document.getElementById('health-line').innerText")
+            stale_class = browser.evaluate("document.getElementById('health-line').className")
+            change_lines = browser.evaluate(
+                "document.querySelectorAll('#plot-health .change-line').length"
+            )
+            stale_shot = browser.screenshot(tmp_path / "dashboard-stale.png", full_page=False)
+            with server.client() as c:  # enough post-change data: the retraining goes through
+                df, _ = world(t, 360, sensor=SENSOR_B, seed=30, positions=False)
+                c.post("/v1/spacecraft/sc/telemetry", content=_parquet(df), headers=_PQ)
+                versions = c.get("/v1/spacecraft/sc/calibrations").json()
+                for _ in range(600):
+                    if versions[0]["version"] == 2 and versions[0]["status"] == "in_service":
+                        break
+                    import time
+
+                    time.sleep(0.2)
+                    versions = c.get("/v1/spacecraft/sc/calibrations").json()
+                df, _ = world(t + 3600.0, 360, sensor=SENSOR_B, seed=31, positions=False)
+                c.post("/v1/spacecraft/sc/telemetry", content=_parquet(df), headers=_PQ)
+            browser.evaluate("location.reload()")
+            assert browser.wait_for("document.body.dataset.ready") == "sc"
+            ok_line = browser.evaluate("document.getElementById('health-line').innerText")
+            newest = browser.evaluate(
+                "[...document.querySelectorAll('#plot-versions .newest-point')].length"
+            )
+            caption = browser.evaluate("document.getElementById('versions-caption').innerText")
+            ok_shot = browser.screenshot(tmp_path / "dashboard-healthy-again.png", full_page=False)
+            errors = list(browser.console_errors)
+    for shot in (loading_shot, stale_shot, ok_shot):
+        keep_screenshot(shot)
+    assert loading["loading"] != "none" and loading["text"].startswith("Loading")
+    assert loading["detail"] == "none"  # no empty panel while loading
+    assert loading["table"] == "loading…"
+    assert stale_class == "health stale", stale_line
+    assert stale_line.startswith("Version 1, in service since "), stale_line
+    assert "STALE: the error grew from 2022-08-01 " in stale_line, stale_line
+    assert "retraining on data after the change only" in stale_line
+    assert change_lines == 1
+    assert ok_line.startswith("Version 2, in service since ") and "healthy" in ok_line, ok_line
+    assert newest == 2  # v1's error on the newest data it saw, and v2's
+    assert "Triangle: its RMS on the newest data" in caption
+    assert errors == [], errors
+
+
+_PQ = {"content-type": "application/vnd.apache.parquet"}

@@ -115,7 +115,7 @@ def test_out_of_range_retrain_parameters_and_schedules_are_422_naming_the_field(
         "method": "linear",
         "field": "IGRF-14",
         "window_s": 315_576_000.0,
-        "holdout_fraction": 0.2,
+        "holdout_fraction": 0.25,
         "min_samples": 200,
         "seed": 2**63 - 1,
     }

@@ -133,7 +133,9 @@ def test_scheduler_recovers_after_a_parameter_change(tmp_path: Path) -> None:
         _upload(c, "swarm-a", after, fmt="csv")
         versions = wait_versions(c, "swarm-a", 2)
         job = wait_job(c, versions[0]["job_id"])
-        assert job["trigger"] == "schedule"
+        # the health check (issue 47) queues it right after the upload's commit, unless a
+        # scheduler tick fell in between; either way it fits only data after the change
+        assert job["trigger"] in ("health", "schedule")
         v2 = c.get("/v1/spacecraft/swarm-a/calibration").json()
     assert [v["status"] for v in versions] == ["in_service", "superseded"]
     assert v2["version"] == 2
