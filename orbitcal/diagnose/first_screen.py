@@ -181,6 +181,9 @@ def param_label(name: str) -> str:
     m = re.fullmatch(r"sun_([xyz])_to_([xyz])_nt", name)
     if m:
         return f"Sun along body {m.group(1)} into sensor {m.group(2)}"
+    m = re.fullmatch(r"(offset|scale)_([xyz])(?:_nt)?_per_degc", name)
+    if m:
+        return f"thermal {m.group(1)} coefficient, {m.group(2)}"
     stem = name
     for suffix, _ in _UNITS:
         if name.endswith(suffix):
@@ -344,6 +347,14 @@ def _rms_line(report: Mapping[str, Any], verdict: str) -> str:
 
 def _caveat(report: Mapping[str, Any], verdict: str) -> str | None:
     gap = report.get("gap") or {}
+    if verdict == "none" and not gap.get("unexplained"):
+        whole = [str(n) for n in gap.get("absorbed_by_calibration") or []]
+        if whole:
+            return (
+                f"The calibration would take up {', '.join(whole[:2])} whole on this span: if "
+                "present, it cannot be seen here."
+            )
+        return None
     if verdict == "none":
         if gap.get("unexplained"):
             inseparable = [str(n) for n in gap.get("inseparable") or []]
@@ -409,6 +420,12 @@ def _next_steps(report: Mapping[str, Any], verdict: str) -> list[str]:
         if twins:
             hints = "; ".join(f"{SEPARATING_DATA.get(t, 'more data')} (for {t})" for t in twins)
             steps.append(f"to tell {name} from {', '.join(twins)}: {hints}")
+    gap = report.get("gap") or {}
+    if not steps and verdict == "none" and gap and not gap.get("unexplained"):
+        steps.append(
+            "nothing to correct: what the calibration leaves on the held-out blocks is at the "
+            "noise floor; keep the calibration and watch its residual on new data"
+        )
     if not steps:
         steps.append(NOTHING_FOUND)
     return steps
