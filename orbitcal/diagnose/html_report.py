@@ -20,7 +20,7 @@ import base64
 import json
 import math
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cache
 from importlib import resources
@@ -36,7 +36,14 @@ from orbitcal.diagnose.first_screen import (
     plain,
 )
 
-__all__ = ["EFFECT_TITLES", "NEXT_STEP", "NOTHING_FOUND", "format_number", "report_html"]
+__all__ = [
+    "EFFECT_TITLES",
+    "NEXT_STEP",
+    "NOTHING_FOUND",
+    "first_screen_html",
+    "format_number",
+    "report_html",
+]
 
 _AXES = "xyz"
 
@@ -669,3 +676,21 @@ def report_html(report: dict[str, Any], *, title: str = "orbitcal diagnosis") ->
         The page's title (e.g. naming the spacecraft).
     """
     return str(_template().render(page=_page(report, title)))
+
+
+def first_screen_html(report: Mapping[str, Any]) -> str:
+    """The first screen's claims as an HTML fragment (a notebook's view of a report): what is
+    wrong, its size, how sure and what to do next, as :func:`report_html` states them."""
+    screen = first_screen(report)
+    rows = [("What is wrong", _esc(screen.headline))]
+    if screen.size:
+        rows.append(("Size", str(_code(screen.size))))
+    rows.append(("How sure", "<br>".join(_esc(line) for line in screen.how_sure)))
+    steps = "".join(f"<li>{_code(step)}</li>" for step in screen.next_steps)
+    rows.append(("What to do next", f'<ul style="margin:0;padding-left:1.1em">{steps}</ul>'))
+    body = "".join(
+        f'<tr><th style="text-align:left;vertical-align:top">{k}</th>'
+        f'<td style="text-align:left">{v}</td></tr>'
+        for k, v in rows
+    )
+    return f'<table class="orbitcal-report">{body}</table>'
