@@ -85,5 +85,6 @@ def test_the_notebook_block_runs_from_the_folder_holding_the_clone(tmp_path: Pat
     assert out.returncode == 0, out.stderr[-3000:]
     lines = out.stdout.splitlines()
     assert lines[-2] == "time_offset", out.stdout
+    assert lines[-3].startswith("Report(verdict time_offset, time offset dt = −0.")
     assert lines[-1] == f"from {clone / 'orbitcal' / '__init__.py'}", out.stdout
     assert lines[0].startswith("CalibrationRun(linear, spacecraft 'ISS (ZARYA)', 2160 samples")
