@@ -145,3 +145,18 @@ def test_the_report_is_typed_short_and_reads_as_a_mapping() -> None:
     html = report._repr_html_()
     assert html.startswith('<table class="orbitcal-report">') and len(html) < 3000
     assert "add −0.497 s to the magnetometer time tags" in html
+
+
+def test_a_diagnosis_shows_its_report_in_one_line(
+    world: tuple[orbitcal.Telemetry, orbitcal.Orbit],
+) -> None:
+    from orbitcal.diagnose import DiagnosisOptions, diagnose
+
+    tel, orbit = world
+    diagnosis = diagnose(tel, orbit=orbit, options=DiagnosisOptions(learned=False))
+    text = repr(diagnosis)
+    assert text.startswith("Diagnosis(Report(verdict ") and text.endswith(" on 540 samples)")
+    assert "\n" not in text and len(text) < 250 and "array(" not in text
+    assert diagnosis._repr_html_() == diagnosis.report._repr_html_()
+    report = orbitcal.diagnose_table(tel, orbit=orbit)
+    assert repr(report).startswith("Report(verdict ") and len(repr(report)) < 200

@@ -141,3 +141,10 @@ class Diagnosis:
     report: Report
     attribution: Attribution
     data: DiagnosisData
+
+    def __repr__(self) -> str:
+        """One line: the report's, and how many samples it ran on (not the arrays)."""
+        return f"Diagnosis({self.report!r} on {int(self.data.n)} samples)"
+
+    def _repr_html_(self) -> str:
+        return self.report._repr_html_()
