@@ -278,3 +278,15 @@ def test_first_screen_agrees_with_the_json_over_worlds(
         assert not report["effects"][0].get("inseparable")
     if verdict == "none":
         assert s.steps[0].startswith("nothing to correct")
+
+
+def test_each_effect_states_its_probability_when_the_report_has_one(
+    report: dict[str, Any],
+) -> None:
+    new = copy.deepcopy(report)
+    for k, e in enumerate(new["effects"]):
+        e["probability"] = 0.97 if k == 0 else 0.004
+    page = report_html(new)
+    assert "probability 97 % that it is present; held-out RMS 16.0 → 2.08 nT" in page
+    assert "not significant (probability 0 %)" in page
+    assert "probability" not in report_html(report)

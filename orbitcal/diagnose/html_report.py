@@ -175,6 +175,15 @@ class EffectView:
     params: list[ParamRow]
     notes: list[str]
     all_bound_limited: bool
+    probability: str = ""
+
+
+def _probability(p: Any) -> str:
+    """An effect's ``probability`` (0-1, calibrated; CONTRACT section 5) as a percentage, or ""
+    when the report has none."""
+    if isinstance(p, bool) or not isinstance(p, int | float) or not math.isfinite(float(p)):
+        return ""
+    return f"{100.0 * float(p):.0f} %"
 
 
 def _effect_view(e: dict[str, Any], age_days: float | None = None) -> EffectView:
@@ -197,6 +206,7 @@ def _effect_view(e: dict[str, Any], age_days: float | None = None) -> EffectView
         params=rows,
         notes=[plain(n) for n in _notes(e)],
         all_bound_limited=bool(rows) and all(r.bound_limited for r in rows),
+        probability=_probability(e.get("probability")),
     )
 
 
