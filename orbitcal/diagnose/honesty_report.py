@@ -190,10 +190,16 @@ def _inseparable(
 
 
 def _mark_withdrawn(
-    report: dict[str, Any], att: Attribution, rv: Review, inseparable: Sequence[str]
+    report: dict[str, Any],
+    att: Attribution,
+    rv: Review,
+    inseparable: Sequence[str] | None = None,
 ) -> None:
     """Each effect the review withdrew: not significant, its status and the reason
-    (``inseparable``: the candidates the span cannot tell from the calibration)."""
+    (``inseparable``: the candidates the span cannot tell from the calibration, by default
+    :func:`~orbitcal.diagnose.honesty.inseparable_candidates`)."""
+    if inseparable is None:
+        inseparable = inseparable_candidates(att)
     by_name = {e["name"]: e for e in report["effects"]}
     residues = [r for r in rv.residues if r["possible_residue"]]
     for r in residues:
