@@ -5,7 +5,7 @@ JSON it was drawn from: the verdict, its size (value and 90 % interval, and whet
 be separable from the calibration), how sure (at most three short lines; a percentage only for a
 probability; the held-out RMS before and after), the next step (one per selected effect, a
 time-tag correction with the fitted offset's sign), and no JSON key anywhere on the page. The
-slow test does this over worlds simulated and diagnosed end to end (a time-tag error that cannot
+last test does this over worlds simulated and diagnosed end to end (a time-tag error that cannot
 be told from an orbit error, a temperature coefficient, torquer leakage, nothing injected); the
 fast ones over the committed report and variants of it (a probability and a confirmation block
 as the new diagnosis adds them, a size that is not measured).
@@ -259,7 +259,6 @@ def _diagnosed(tmp: Path, effect: str | None) -> dict[str, Any]:
     return json.loads(report.read_text())  # type: ignore[no-any-return]
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize(
     ("effect", "verdict"),
     [("time_offset", "time_offset"), ("temperature", "temperature"),
