@@ -27,6 +27,7 @@ if TYPE_CHECKING:
     import numpy.typing as npt
     import pandas as pd
 
+    from orbitcal.diagnose.result import Report
     from orbitcal.orbit import Orbit
     from orbitcal.pipeline import CalibrationRun
     from orbitcal.telemetry import Telemetry
@@ -270,10 +271,13 @@ def diagnose_table(
     attitude_frame: str = "GCRS",
     calibration: Mapping[str, Any] | None = None,
     seed: int = 0,
-) -> dict[str, Any]:
+) -> Report:
     """Which unmodelled effect explains the calibrated residual (CONTRACT section-5 report).
 
-    A thin wrapper of :func:`orbitcal.diagnose.diagnose` for notebooks: the report as a dict.
+    A thin wrapper of :func:`orbitcal.diagnose.diagnose` for notebooks: the typed, read-only
+    :class:`~orbitcal.diagnose.Report` (``report["verdict"]`` as a dict's; ``to_json()`` the
+    document, ``to_frame()`` the candidates, ``to_frame("time")`` the residual by UTC time; a
+    notebook shows its first screen).
     The whole :class:`~orbitcal.diagnose.Diagnosis` (with the attribution and the arrays) and
     every option (:class:`~orbitcal.diagnose.DiagnosisOptions`) are there.
 
@@ -290,7 +294,7 @@ def diagnose_table(
 
     Returns
     -------
-    dict
+    orbitcal.diagnose.Report
         ``verdict``, ranked ``effects`` with their held-out shrink, ``baseline`` and ``final``.
     """
     from orbitcal.diagnose.api import diagnose
@@ -298,4 +302,4 @@ def diagnose_table(
 
     options = DiagnosisOptions(field=field, attitude_frame=attitude_frame, seed=seed)
     diagnosis = diagnose(telemetry, orbit=orbit, options=options, prior=calibration)
-    return diagnosis.report.to_json()
+    return diagnosis.report

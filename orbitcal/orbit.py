@@ -394,6 +394,17 @@ class Orbit:
     def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
         return (_orbit_from_source, (self.source, self.name))
 
+    def __repr__(self) -> str:
+        """``Orbit('ISS (ZARYA)', NORAD 25544, epoch 2022-08-01T21:26:45Z, from a TLE)``: the
+        spacecraft and the elements' epoch, not the SGP4 record's address."""
+        from orbitcal.timescales import utc_s_to_iso
+
+        (epoch,) = utc_s_to_iso([float(self.epoch_utc_s)])
+        origin = {"tle": ", from a TLE", "omm": ", from an OMM"}.get(
+            self.source[0] if self.source else "", ""
+        )
+        return f"Orbit({self.name!r}, NORAD {self.norad_id}, epoch {epoch[:19]}Z{origin})"
+
     @property
     def tle_lines(self) -> tuple[str, str]:
         """The two TLE lines (as read, or exported by ``sgp4.exporter`` for an OMM origin)."""

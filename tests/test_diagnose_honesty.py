@@ -279,10 +279,13 @@ def test_a_verdict_not_separable_and_unstable_says_both() -> None:
     report = review_report(_report(att, "time_offset", 0.0), data, att)
     assert report["separable"] is False
     status = report["verdict_status"]
-    assert "wins only 0% of the resamples" in status and "is present" not in status
+    assert "wins only in no resample of the held-out blocks" in status
+    assert "is present" not in status and "% of the resamples" not in status
     assert "cannot be separated from the calibration" in status
     report = review_report(_report(att, "time_offset", 1.0), data, att)
-    assert report["verdict_status"].startswith("tentative: time_offset is present (confidence 100%")
+    assert report["verdict_status"].startswith(
+        "tentative: time_offset is present (it wins in every resample of the held-out blocks)"
+    )
     assert report["verdict_confidence_of"] == "presence"
 
 

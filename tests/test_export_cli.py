@@ -131,3 +131,30 @@ def test_the_command_offers_the_library_formats() -> None:
 
     # the CLI keeps its own copy so that `orbitcal --help` imports no numpy
     assert cli_export._FORMATS == FORMATS
+
+
+def test_polynomial_without_telemetry_states_what_it_knows_of_its_loss(
+    swarm_a_temperature_world: Any, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Issue 47: without --telemetry the held-out loss cannot be measured; the command says so,
+    how to measure it, and the bound the coefficients give (which the measured loss obeys)."""
+    from orbitcal.export.polynomial import LEO_FIELD_MAX_NT
+
+    for method in ("linear", "lmbp-hk"):
+        f = fitted(swarm_a_temperature_world, method)
+        cal = tmp_path / f"{method}.json"
+        cal.write_text(json.dumps(f.document))
+        out = tmp_path / f"{method}-p.json"
+        assert main(["export", str(cal), "--format", "polynomial", "--out", str(out)]) == 0
+        printed = capsys.readouterr().out
+        assert "held-out RMS of this form: not measured (export with --telemetry TABLE" in printed
+        aff = affine_part(calibration_form(f.document))
+        bound = np.abs(aff.M - np.diag(np.diag(aff.M))).sum(axis=1) * LEO_FIELD_MAX_NT
+        stated = ", ".join(f"{v:.3g}" for v in bound)
+        assert f"change x, y, z by at most {stated} nT at a field of 65,000 nT" in printed
+        assert json.loads(out.read_text())["notes"][-1] in printed
+        if method == "linear":
+            loss = held_out_loss(f.document, f.telemetry, orbit=f.orbit)
+            assert loss.diagonal_max_abs_diff_nt <= float(np.max(bound))
+        else:
+            assert "housekeeping terms" in printed and "cannot be bounded" in printed

@@ -46,7 +46,7 @@ def _residual(t: Telemetry) -> np.ndarray:
 
 def test_the_table_first_rows(table: Telemetry) -> None:
     assert len(table) == 100  # every MAG1B record lies inside GNV1B's and SCA1B's spans
-    df = table.to_frame()
+    df = table.to_table_frame()
     # 738849600 s + 83329 µs past 2000-01-01 12:00 GPS = 2023-06-01T00:00:00.083329 GPS = -18 s UTC
     assert df["time"].iloc[0] == "2023-05-31T23:59:42.083329Z"
     assert df["time"].iloc[1] == "2023-05-31T23:59:42.583329Z"

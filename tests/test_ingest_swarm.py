@@ -37,7 +37,7 @@ def test_vires_csv_and_cdf_give_the_same_table() -> None:
     np.testing.assert_allclose(a.b_raw_nt, b.b_raw_nt, atol=1e-9)
     np.testing.assert_allclose(a.r_itrs_km, b.r_itrs_km, atol=1e-9)
     # first row: 2016-01-01T00:28:00Z, B_NEC {23432.0698;2929.1195;7001.0706}, r = 6828.39061 km
-    assert a.to_frame()["time"].iloc[0] == "2016-01-01T00:28:00.000000Z"
+    assert a.to_table_frame()["time"].iloc[0] == "2016-01-01T00:28:00.000000Z"
     np.testing.assert_allclose(a.b_raw_nt[0], [23432.0698, 2929.1195, 7001.0706])
     assert np.linalg.norm(a.r_itrs_km[0]) == pytest.approx(6828.39061, abs=1e-9)
 

@@ -78,8 +78,7 @@ def test_a_frame_indexed_by_time_is_accepted_or_refused_with_a_hint(
     world: tuple[orbitcal.Telemetry, orbitcal.Orbit],
 ) -> None:
     tel = world[0]
-    frame = tel.to_frame()
-    indexed = frame.set_index(pd.to_datetime(frame.pop("time"), utc=True))
+    indexed = tel.to_frame()  # indexed by UTC time
     same = orbitcal.read_table(indexed)
     np.testing.assert_allclose(same.t_utc_s, tel.t_utc_s, atol=1e-6)
     np.testing.assert_array_equal(same.b_raw_nt, tel.b_raw_nt)
@@ -98,3 +97,66 @@ def test_the_document_names_its_spacecraft(
     )
     run = orbitcal.calibrate_table(tel, orbit=orbit, method="linear", spacecraft="swarm-a")
     assert run.document["spacecraft"] == "swarm-a"
+
+
+def test_orbit_repr_names_the_spacecraft_not_the_sgp4_record(
+    world: tuple[orbitcal.Telemetry, orbitcal.Orbit],
+) -> None:
+    orbit = world[1]
+    text = repr(orbit)
+    assert (
+        text.startswith("Orbit('SWARM A', NORAD 39452, epoch 2022-08-0") and "Z, from a TLE" in text
+    )
+    assert "Satrec" not in text and "0x" not in text and len(text) < 100
+
+
+def test_the_report_is_typed_short_and_reads_as_a_mapping() -> None:
+    """Issue 47: diagnose_table's report (here the committed report of the README's world)."""
+    import json
+    from collections.abc import Mapping
+    from pathlib import Path
+
+    from orbitcal.diagnose import Report
+
+    doc = json.loads(
+        (Path(__file__).parent / "fixtures" / "diagnosis_report_time_offset.json").read_text()
+    )
+    report = Report.from_json(doc)
+    assert repr(report) == (
+        "Report(verdict time_offset, time offset dt = −0.497 s; held-out RMS 16.0 → 2.08 nT; "
+        "11 candidates)"
+    )
+    assert isinstance(report, Mapping) and report["verdict"] == "time_offset"
+    assert set(report) == set(doc) and len(report) == len(doc) and report.to_json() == doc
+    report["baseline"]["holdout_rms_nt"] = 0.0  # a copy: the report does not change
+    assert report["baseline"]["holdout_rms_nt"] == doc["baseline"]["holdout_rms_nt"]
+    effects = report.to_frame()
+    assert effects.index.name == "effect" and list(effects.index) == [
+        e["name"] for e in doc["effects"]
+    ]
+    assert effects.loc["time_offset", "holdout_rms_after_nt"] == doc["final"]["holdout_rms_nt"]
+    by_time = report.to_frame("time")
+    assert isinstance(by_time.index, pd.DatetimeIndex) and str(by_time.index.tz) == "UTC"
+    assert by_time.index[0] > pd.Timestamp(doc["data"]["start"])
+    assert by_time.index[-1] < pd.Timestamp(doc["data"]["end"])
+    assert by_time["held_out"].iloc[-1] and not by_time["held_out"].iloc[0]
+    with pytest.raises(ValueError, match="'effects' or 'time'"):
+        report.to_frame("samples")
+    html = report._repr_html_()
+    assert html.startswith('<table class="orbitcal-report">') and len(html) < 3000
+    assert "add −0.497 s to the magnetometer time tags" in html
+
+
+def test_a_diagnosis_shows_its_report_in_one_line(
+    world: tuple[orbitcal.Telemetry, orbitcal.Orbit],
+) -> None:
+    from orbitcal.diagnose import DiagnosisOptions, diagnose
+
+    tel, orbit = world
+    diagnosis = diagnose(tel, orbit=orbit, options=DiagnosisOptions(learned=False))
+    text = repr(diagnosis)
+    assert text.startswith("Diagnosis(Report(verdict ") and text.endswith(" on 540 samples)")
+    assert "\n" not in text and len(text) < 250 and "array(" not in text
+    assert diagnosis._repr_html_() == diagnosis.report._repr_html_()
+    report = orbitcal.diagnose_table(tel, orbit=orbit)
+    assert repr(report).startswith("Report(verdict ") and len(repr(report)) < 200

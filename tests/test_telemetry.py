@@ -244,11 +244,20 @@ def test_regressors_select_sort_and_frame() -> None:
     assert len(sub) == 5 and sub.hk["hk_mode"].shape == (5,)
     rev = tel.select(np.arange(10)[::-1]).sort_by_time()
     _assert_same(tel, rev)
-    frame = tel.to_frame()
+    frame = tel.to_table_frame()
     assert list(frame.columns[:4]) == ["time", "b_x", "b_y", "b_z"]
     assert frame["time"].iloc[0] == "2023-07-22T04:26:40.123456Z"
     res = from_frame(frame)
     _assert_same(tel, res.telemetry)
+    # to_frame: indexed by UTC time like CalibrationRun.to_frame(), and read back as it is
+    by_time = tel.to_frame()
+    assert isinstance(by_time.index, pd.DatetimeIndex) and str(by_time.index.tz) == "UTC"
+    assert by_time.index.name == "time" and "time" not in by_time.columns
+    assert by_time.index[0] == pd.Timestamp("2023-07-22T04:26:40.123456Z")
+    assert list(by_time.columns) == list(frame.columns[1:])
+    from orbitcal.api import read_table
+
+    _assert_same(tel, read_table(by_time))
 
 
 def test_write_field_csv(tmp_path: Path) -> None:

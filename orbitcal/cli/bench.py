@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import platform
 import time
 from pathlib import Path
+from typing import Any
 
 __all__ = ["register", "run_diagnose"]
 
@@ -56,6 +58,42 @@ def _machine(wall_s: float) -> dict[str, object]:
     }
 
 
+def _share(x: object, missing: str) -> str:
+    """A share as a percentage, or ``missing`` when there is none (NaN: no case to count)."""
+    if not isinstance(x, int | float) or not math.isfinite(float(x)):
+        return missing
+    return f"{float(x):.1%}"
+
+
+def _ratio(x: object, missing: str = "–") -> str:
+    if not isinstance(x, int | float) or not math.isfinite(float(x)):
+        return missing
+    return f"{float(x):.3f}"
+
+
+def summary_line(s: dict[str, Any], wall_s: float) -> str:
+    """The benchmark's one-line summary; a share with nothing to count is said in words (a
+    draw without a null world has no false-alarm rate: "no null world", never "nan%")."""
+    return (
+        f"cases {s['cases']}: top-1 {_share(s['top1'], '–')} "
+        f"(strict {_share(s['top1_strict'], '–')}, {s['unobservable_cases']} worlds without a "
+        f"gap; min per effect {_share(s['min_top1_per_effect'], 'no effect world')}), "
+        f"false alarms on null {_share(s['false_alarm_rate'], 'no null world')}, "
+        f"shrink vs oracle {_ratio(s['shrink_vs_oracle_mean'], 'no effect world')} "
+        f"(pooled {_ratio(s['shrink_vs_oracle_pooled'])}), {wall_s:.0f} s"
+    )
+
+
+def _case_line(i: int, total: int, out: dict[str, object], correct: int, wall_s: float) -> str:
+    """One world's progress line: ``world 3/240: time_offset -> time_offset (right); top-1 so
+    far 100.0 %, 41 s``."""
+    mark = "right" if out.get("correct") else "wrong"
+    return (
+        f"world {i + 1}/{total}: {out.get('effect')} -> {out.get('verdict')} ({mark}); "
+        f"top-1 so far {correct / (i + 1):.1%}, {wall_s:.0f} s"
+    )
+
+
 def run_diagnose(args: argparse.Namespace) -> int:
     """Run the blind diagnosis benchmark with a progress bar; print the summary."""
     from rich.console import Console
@@ -80,41 +118,46 @@ def run_diagnose(args: argparse.Namespace) -> int:
     console = Console(stderr=True)
     correct = 0
     t0 = time.perf_counter()
-    with Progress(
-        TextColumn("[bold]diagnose[/]"),
-        BarColumn(),
-        TextColumn("{task.completed}/{task.total}"),
-        TextColumn("top-1 {task.fields[acc]}"),
-        TimeElapsedColumn(),
-        console=console,
-    ) as progress:
-        task = progress.add_task("cases", total=args.cases, acc="-")
-
-        def on_case(i: int, out: dict[str, object]) -> None:
+    if not console.is_terminal:
+        # Not a terminal (a pipe, a log file, CI): a bar would draw nothing for the whole run
+        # (9.5 min of silence at 240 worlds); one plain line per world instead.
+        def on_line(i: int, out: dict[str, object]) -> None:
             nonlocal correct
             correct += bool(out["correct"])
-            progress.update(task, advance=1, acc=f"{correct / (i + 1):.1%}")
+            print(_case_line(i, args.cases, out, correct, time.perf_counter() - t0), flush=True)
 
         result = run_benchmark(
-            args.cases,
-            seed=args.seed,
-            tle_text=tle_text,
-            n_orbits=args.orbits,
-            progress=on_case,
+            args.cases, seed=args.seed, tle_text=tle_text, n_orbits=args.orbits, progress=on_line
         )
+    else:
+        with Progress(
+            TextColumn("[bold]diagnose[/]"),
+            BarColumn(),
+            TextColumn("{task.completed}/{task.total}"),
+            TextColumn("top-1 {task.fields[acc]}"),
+            TimeElapsedColumn(),
+            console=console,
+        ) as progress:
+            task = progress.add_task("cases", total=args.cases, acc="-")
+
+            def on_case(i: int, out: dict[str, object]) -> None:
+                nonlocal correct
+                correct += bool(out["correct"])
+                progress.update(task, advance=1, acc=f"{correct / (i + 1):.1%}")
+
+            result = run_benchmark(
+                args.cases,
+                seed=args.seed,
+                tle_text=tle_text,
+                n_orbits=args.orbits,
+                progress=on_case,
+            )
     wall = time.perf_counter() - t0
     result["machine"] = _machine(wall)
     s = result["summary"]
-    print(
-        f"cases {s['cases']}: top-1 {s['top1']:.1%} "
-        f"(strict {s['top1_strict']:.1%}, {s['unobservable_cases']} worlds without a gap; "
-        f"min per effect {s['min_top1_per_effect']:.1%}), "
-        f"false alarms on null {s['false_alarm_rate']:.1%}, shrink vs oracle "
-        f"{s['shrink_vs_oracle_mean']:.3f} (pooled {s['shrink_vs_oracle_pooled']:.3f}), "
-        f"{wall:.0f} s"
-    )
+    print(summary_line(s, wall))
     for name, entry in s["per_effect"].items():
-        print(f"  {name:24s} {entry['cases']:4d} cases  top-1 {entry['top1']:.1%}")
+        print(f"  {name:24s} {entry['cases']:4d} cases  top-1 {_share(entry['top1'], '–')}")
     if args.out:
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
@@ -132,8 +175,18 @@ def _run_compound(args: argparse.Namespace, tle_text: str) -> int:
     from orbitcal.diagnose.bench import run_compound_benchmark
 
     t0 = time.perf_counter()
+
+    def on_world(i: int, out: dict[str, Any]) -> None:
+        # one plain line per world (the compound run had no progress at all)
+        print(
+            f"world {i + 1}/{args.cases}: {' + '.join(map(str, out.get('effects') or []))} -> "
+            f"{', '.join(map(str, out.get('selected') or [])) or 'none'} "
+            f"({len(out.get('spurious') or [])} spurious); {time.perf_counter() - t0:.0f} s",
+            flush=True,
+        )
+
     result = run_compound_benchmark(
-        args.cases, seed=args.seed, tle_text=tle_text, n_orbits=args.orbits
+        args.cases, seed=args.seed, tle_text=tle_text, n_orbits=args.orbits, progress=on_world
     )
     wall = time.perf_counter() - t0
     result["machine"] = _machine(wall)

@@ -107,4 +107,18 @@ def run(args: argparse.Namespace) -> int:
         f"-> {report.final_holdout_rms_nt} nT; report written to {args.out}"
         + (f", HTML page to {args.html}" if args.html else "")
     )
+    _print_first_screen(report.to_json())
     return 0
+
+
+def _print_first_screen(document: dict[str, object]) -> None:
+    """The report page's first screen as plain lines: size, how sure, what to do next."""
+    from orbitcal.diagnose.first_screen import first_screen
+
+    screen = first_screen(document)
+    if screen.size:
+        print(f"  size: {screen.size.replace('`', '')}")
+    for line in screen.how_sure:
+        print(f"  how sure: {line}")
+    for step in screen.next_steps:
+        print(f"  next: {step.replace('`', '')}")

@@ -13,6 +13,7 @@ command line.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 
 from orbitcal.cli._inputs import add_orbit_arguments
@@ -186,6 +187,10 @@ def run(args: argparse.Namespace) -> int:
         from orbitcal.export.yamcs_instance import START_COMMAND
 
         print(f"export: start it with: cd {args.out} && {START_COMMAND}")
+    if loss is None and args.format == "polynomial" and result.content is not None:
+        # the file's own notes: what the polynomials drop, and what is known of the loss
+        for note in json.loads(result.content)["notes"]:
+            print(f"export: {note}")
     if result.report is not None:
         print(
             f"export: set {result.report['n_set']} parameters on {args.yamcs_url} "

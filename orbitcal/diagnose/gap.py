@@ -374,6 +374,8 @@ def verdict_status(
     ``absorbed``: every candidate the calibration takes up whole on this span
     (:func:`orbitcal.diagnose.honesty.absorbed_candidates`); ``own_test``: the effects judged on
     their own latitudes (auroral currents)."""
+    from orbitcal.diagnose.claims import resample_words
+
     gap = report["gap"]
     unseen = (
         _taken_whole(absorbed) + "; what would decide: " + deciders(absorbed)
@@ -411,13 +413,13 @@ def verdict_status(
             (
                 f"tentative: {verdict} is present"
                 + (
-                    f" (confidence {conf:.0%} over resamples of the held-out blocks)"
+                    f" (it wins in {resample_words(conf)} of the held-out blocks)"
                     if conf is not None
                     else ""
                 )
                 if conf is None or conf >= FIRM_CONFIDENCE
-                else f"tentative: {verdict} is named by the held-out test but wins only "
-                f"{conf:.0%} of the resamples of the held-out blocks"
+                else f"tentative: {verdict} is named by the held-out test but wins only in "
+                f"{resample_words(conf)} of the held-out blocks"
             )
             + ", but its size cannot be separated from the calibration on this span "
             f"({separation[verdict]['absorbed_fraction']:.0%} of its field is a change of the 12 "

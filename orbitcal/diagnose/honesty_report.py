@@ -85,7 +85,8 @@ def review_report(
         e["param_bound_limited"] = limited
         e["bound_limited"] = any(limited.values())
     rv = rv if rv is not None else review(data, att)
-    _mark_withdrawn(report, att, rv)
+    inseparable = _inseparable(report, att, rv, data.element_age_days)
+    _mark_withdrawn(report, att, rv, inseparable)
     changed = rv.keep != list(att.selected)
     if changed or rv.blockless:
         _final_section(report, data, att, rv)
@@ -107,7 +108,7 @@ def review_report(
         rv.final.residual_nt,
         rv.final.rms_nt,
         att.holdout,
-        inseparable_candidates(att),
+        inseparable,
         beside=(
             (list(rv.keep), att.beside_final)
             if att.beside_final and sorted(rv.keep) == sorted(att.beside_final_of)
@@ -162,8 +163,43 @@ def _withdraw(
             e[reason_key] = reason
 
 
-def _mark_withdrawn(report: dict[str, Any], att: Attribution, rv: Review) -> None:
-    """Each effect the review withdrew: not significant, its status and the reason."""
+def _inseparable(
+    report: dict[str, Any], att: Attribution, rv: Review, age_days: float | None
+) -> list[str]:
+    """The candidates the span cannot tell from the calibration
+    (:func:`~orbitcal.diagnose.honesty.inseparable_candidates`) but those that stand with a
+    measured size (:func:`orbitcal.diagnose.claims.size_measured`): most of such an effect's
+    field is a change of the 12 parameters, and the rest fixes its size, so the report says so
+    (``absorbed_reason``) and not that it cannot be separated."""
+    from orbitcal.diagnose.claims import size_measured
+
+    by_name = {e["name"]: e for e in report["effects"]}
+    out = []
+    for name in inseparable_candidates(att):
+        e = by_name[name]
+        if name in rv.keep and size_measured(e, age_days=age_days):
+            e["absorbed_reason"] = (
+                f"{float(e.get('absorbed_by_calibration_fraction') or 0.0):.1%} of its fitted "
+                "field looks like a change of the 12 calibration parameters; the rest, which no "
+                "change of them produces, measures its size (its 90 % intervals) and shrinks "
+                "the held-out residual"
+            )
+            continue
+        out.append(name)
+    return out
+
+
+def _mark_withdrawn(
+    report: dict[str, Any],
+    att: Attribution,
+    rv: Review,
+    inseparable: Sequence[str] | None = None,
+) -> None:
+    """Each effect the review withdrew: not significant, its status and the reason
+    (``inseparable``: the candidates the span cannot tell from the calibration, by default
+    :func:`~orbitcal.diagnose.honesty.inseparable_candidates`)."""
+    if inseparable is None:
+        inseparable = inseparable_candidates(att)
     by_name = {e["name"]: e for e in report["effects"]}
     residues = [r for r in rv.residues if r["possible_residue"]]
     for r in residues:
@@ -197,7 +233,7 @@ def _mark_withdrawn(report: dict[str, Any], att: Attribution, rv: Review) -> Non
             f"significant on its own and a field fixed in space, as {', '.join(rv.unlit)} drew "
             "without an eclipse: in its place it shrinks the held-out residual significantly"
         )
-    for name in inseparable_candidates(att):
+    for name in inseparable:
         e = by_name[name]
         e["inseparable"] = True
         e["inseparable_reason"] = (

@@ -20,83 +20,32 @@ import base64
 import json
 import math
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cache
 from importlib import resources
 from typing import Any
 
-__all__ = ["EFFECT_TITLES", "NEXT_STEP", "format_number", "report_html"]
-
-#: What each effect of the catalogue is, in an engineer's words.
-EFFECT_TITLES: dict[str, str] = {
-    "none": "no unmodelled effect found",
-    "temperature": "a temperature-dependent offset or scale of the sensor",
-    "magnetorquer": "magnetorquer fields leaking into the sensor",
-    "time_offset": "a time-tag error of the magnetometer samples",
-    "external_field": "an external (magnetospheric, ring-current) field the reference lacks",
-    "crustal_field": "the crustal field the reference lacks",
-    "sun_driven": "a field that follows the Sun (solar-array or heater currents)",
-    "nonlinearity": "a nonlinear sensor response",
-    "orbit_error": "an orbit (position) error of the element set",
-    "parameter_drift": "sensor parameters that changed during the span",
-    "field_aligned_currents": "auroral field-aligned currents",
-    "attitude_error": "an attitude error",
-}
-
-#: What to do once an effect is established (its size is separable from the calibration).
-NEXT_STEP: dict[str, str] = {
-    "temperature": "calibrate with the temperature as an input (`--method linear-hk` or `lmbp-hk`)",
-    "magnetorquer": "calibrate with the torquer commands as inputs (`--method linear-hk` or "
-    "`lmbp-hk`), or leave out the samples taken while the torquers fire",
-    "time_offset": "correct the magnetometer time tags by the fitted offset (`dt_s`) and "
-    "recalibrate",
-    "external_field": "add the external field to the reference (`--field IGRF-14+RC`), or "
-    "calibrate on quiet days",
-    "crustal_field": "add a crustal model to the reference (`--field IGRF-14+LCS-1`)",
-    "sun_driven": "model the Sun-driven field (a solar-array current as an `hk_` input), or "
-    "calibrate sunlit and eclipse data apart",
-    "nonlinearity": "calibrate with a nonlinear method (`--method lmbp`)",
-    "orbit_error": "use fresher elements or GNSS positions (`r_x, r_y, r_z`)",
-    "parameter_drift": "recalibrate on the data after the change (the service's scheduled "
-    "retraining does), or shorten the window",
-    "field_aligned_currents": "calibrate on |magnetic latitude| < 60 deg, or leave the auroral "
-    "crossings out",
-    "attitude_error": "check the attitude solution (star-tracker alignment and time tags)",
-}
-
-#: What to try when nothing in the catalogue explains the residual.
-NOTHING_FOUND = (
-    "nothing in the catalogue explains the residual: more data (several orbits, a temperature "
-    "swing), a prior calibration (`--calibration CAL.json`) or a different attitude (a slew or "
-    "tumbling period) would let the diagnosis see more"
+from orbitcal.diagnose.first_screen import (
+    EFFECT_TITLES,
+    NEXT_STEP,
+    NOTHING_FOUND,
+    first_screen,
+    format_number,
+    param_label,
+    plain,
 )
 
+__all__ = [
+    "EFFECT_TITLES",
+    "NEXT_STEP",
+    "NOTHING_FOUND",
+    "first_screen_html",
+    "format_number",
+    "report_html",
+]
+
 _AXES = "xyz"
-
-
-def format_number(x: Any, digits: int = 3) -> str:
-    """A number to ``digits`` significant digits (thousands grouped, no exponent below 1e6)."""
-    if x is None:
-        return "–"
-    if isinstance(x, bool) or not isinstance(x, int | float):
-        return str(x)
-    v = float(x)
-    if not math.isfinite(v):
-        return "–"
-    if v == 0.0:
-        return "0"
-    if 1e-3 <= abs(v) < 1e6:
-        mag = math.floor(math.log10(abs(v)))
-        decimals = max(digits - 1 - mag, 0)
-        text = f"{round(v, decimals):,.{decimals}f}"
-    else:
-        text = f"{v:.{digits - 1}e}"
-    return text.replace("-", "−")
-
-
-def _pct(x: Any) -> str:
-    return "–" if not isinstance(x, int | float) else f"{100.0 * float(x):.0f} %"
 
 
 # ---- parameters ----------------------------------------------------------------------------
@@ -185,7 +134,9 @@ def _param_rows(effect: dict[str, Any], age_days: float | None = None) -> list[P
                 )
         elif limited:
             text = "bound-limited, not measured"
-        rows.append(ParamRow(name, _param_meaning(name), format_number(value), text, limited))
+        rows.append(
+            ParamRow(param_label(name), _param_meaning(name), format_number(value), text, limited)
+        )
     return rows
 
 
@@ -194,14 +145,15 @@ def _notes(effect: dict[str, Any]) -> list[str]:
     params = effect.get("params") or {}
     for key in ("variant",):
         if isinstance(params.get(key), str):
-            out.append(f"model variant: {params[key]}")
+            out.append(f"model variant: {params[key].replace('_', ' ')}")
     twins = params.get("indistinguishable_from")
     if twins:
         out.append("cannot be told apart on these data from: " + ", ".join(map(str, twins)))
     if effect.get("implausible_reason"):
         out.append(f"implausible: {effect['implausible_reason']}")
-    if isinstance(effect.get("remark"), str):
-        out.append(effect["remark"])
+    for key in ("absorbed_reason", "remark"):
+        if isinstance(effect.get(key), str):
+            out.append(effect[key])
     if str(effect.get("name", "")).startswith("magnetorquer") or any(
         str(k).startswith("coupling_") for k in params
     ):
@@ -223,6 +175,15 @@ class EffectView:
     params: list[ParamRow]
     notes: list[str]
     all_bound_limited: bool
+    probability: str = ""
+
+
+def _probability(p: Any) -> str:
+    """An effect's ``probability`` (0-1, calibrated; CONTRACT section 5) as a percentage, or ""
+    when the report has none."""
+    if isinstance(p, bool) or not isinstance(p, int | float) or not math.isfinite(float(p)):
+        return ""
+    return f"{100.0 * float(p):.0f} %"
 
 
 def _effect_view(e: dict[str, Any], age_days: float | None = None) -> EffectView:
@@ -243,8 +204,9 @@ def _effect_view(e: dict[str, Any], age_days: float | None = None) -> EffectView
         ),
         p_value=format_number(e.get("p_value"), 2),
         params=rows,
-        notes=_notes(e),
+        notes=[plain(n) for n in _notes(e)],
         all_bound_limited=bool(rows) and all(r.bound_limited for r in rows),
+        probability=_probability(e.get("probability")),
     )
 
 
@@ -282,82 +244,6 @@ def _statement(value: Any) -> str | None:
             if isinstance(value.get(key), str):
                 return str(value[key])
     return None
-
-
-def _next_steps(report: dict[str, Any]) -> list[str]:
-    verdict = str(report.get("verdict", "none"))
-    status = str(report.get("verdict_status") or "")
-    steps: list[str] = []
-    selected = [
-        e for e in report.get("effects", []) if isinstance(e, dict) and e.get("significant")
-    ]
-    for s in report.get("separation") or []:
-        if isinstance(s, dict):
-            steps.append(
-                f"{s.get('effect')}: present, but its size is not separable from the calibration "
-                f"on this span; to separate it: {s.get('would_separate')}"
-            )
-    from orbitcal.diagnose.report import SEPARATING_DATA
-
-    for e in selected:
-        twins = [str(t) for t in (e.get("params") or {}).get("indistinguishable_from") or []]
-        if twins:
-            hints = "; ".join(f"for {t}: {SEPARATING_DATA.get(t, 'more data')}" for t in twins)
-            steps.append(
-                f"{e['name']} cannot be told apart from {', '.join(twins)} on these data; "
-                f"what would tell them apart: {hints}"
-            )
-    if status.startswith("tentative: another"):
-        steps.append("more data: another candidate wins in some resamples of the held-out blocks")
-    if verdict == "none":
-        steps.append(NOTHING_FOUND)
-    else:
-        separated = {str(s.get("effect")) for s in report.get("separation") or []}
-        for e in selected:
-            name = str(e.get("name"))
-            if name not in separated and name in NEXT_STEP:
-                steps.append(f"{name}: {NEXT_STEP[name]}")
-    return steps
-
-
-def _confidence(report: dict[str, Any]) -> str:
-    verdict = str(report.get("verdict", "none"))
-    conf = report.get("verdict_confidence")
-    base = report.get("baseline") or {}
-    final = report.get("final") or {}
-    rms = f"held-out RMS {format_number(base.get('holdout_rms_nt'))} nT with the calibration alone"
-    if verdict == "none":
-        return (
-            rms + f" ({base.get('n_holdout', '?')} held-out samples); no candidate effect shrinks "
-            "it significantly"
-        )
-    status = str(report.get("verdict_status") or "")
-    head = status.split(":")[0] if status else "–"
-    why = status.split(":", 1)[1].strip() if ":" in status else ""
-    text = f"{head}" + (f" ({why})" if why else "")
-    if isinstance(conf, int | float):
-        text += (
-            f"; verdict confidence {_pct(conf)} (the share of resamples of the held-out blocks "
-            "in which it still wins)"
-        )
-    text += (
-        f"; {rms} → {format_number(final.get('holdout_rms_nt'))} nT with the selected effects "
-        f"(shrink {format_number(final.get('shrink'))}×)"
-    )
-    return text
-
-
-def _headline(report: dict[str, Any], effects: list[EffectView]) -> str:
-    verdict = str(report.get("verdict", "none"))
-    if verdict == "none":
-        return "No unmodelled effect found"
-    view = next((e for e in effects if e.name == verdict), None)
-    text = f"{verdict}: {EFFECT_TITLES.get(verdict, verdict)}"
-    if view is not None:
-        measured = [p for p in view.params if not p.bound_limited][:1]
-        if measured:
-            text += " (" + "; ".join(f"{p.name} = {p.value}" for p in measured) + ")"
-    return text
 
 
 # ---- figures ---------------------------------------------------------------------------------
@@ -453,8 +339,10 @@ def _line_svg(
     else:
         xt = [(t, _tick(t)) for t in _ticks(x0, x1, 6)]
     for v, lab in xt:
+        # a label at an edge of the plot is anchored inside it ("eclipse" was cut to "eclips")
+        anchor = "start" if px(v) - _LEFT < 20 else "end" if _LEFT + pw - px(v) < 20 else "middle"
         out.append(
-            f'<text x="{px(v):.1f}" y="{_TOP + ph + 14:g}" text-anchor="middle" '
+            f'<text x="{px(v):.1f}" y="{_TOP + ph + 14:g}" text-anchor="{anchor}" '
             f'class="tick">{_esc(lab)}</text>'
         )
     out.append(
@@ -563,7 +451,7 @@ def _split_figure(report: dict[str, Any]) -> Figure | None:
             _line_svg(
                 list(map(float, range(len(off)))),
                 series,
-                title=f"{s.get('name')} (z = {format_number(s.get('z'), 2)})",
+                title=f"{plain(str(s.get('name')))} (z = {format_number(s.get('z'), 2)})",
                 xlabel="part of the data",
                 ylabel="offset − mean [nT]",
                 xticklabels=[str(v) for v in s.get("labels") or range(len(off))],
@@ -635,7 +523,7 @@ def _provenance_rows(prov: dict[str, Any] | None) -> list[list[str]]:
         if isinstance(t, dict):
             rows.append(
                 [
-                    str(name),
+                    plain(str(name)),
                     str(t.get("format") or t.get("file") or ""),
                     str(t.get("origin") or ""),
                     str(t.get("status") or ""),
@@ -649,7 +537,12 @@ _KNOWN = {
     "baseline",
     "verdict",
     "verdict_confidence",
+    "verdict_confidence_of",
     "verdict_status",
+    "verdict_probability",
+    "confirmation",
+    "confounded_with",
+    "separable",
     "separation",
     "effects",
     "where",
@@ -662,6 +555,13 @@ _KNOWN = {
 }
 
 
+#: Titles of the report's sections that carry a statement (shown below the first screen).
+_SECTION_TITLES = {
+    "gap": "What is left",
+    "honesty": "The claims checked on the held-out data",
+}
+
+
 @dataclass
 class Page:
     title: str
@@ -669,7 +569,9 @@ class Page:
     headline: str
     where_sentence: str
     where_after: str | None
-    confidence: str
+    size: str | None
+    separable: bool | None
+    how_sure: list[str]
     statements: list[tuple[str, str]]
     next_steps: list[str]
     evidence: list[Figure]
@@ -680,7 +582,7 @@ class Page:
     provenance_rows: list[list[str]]
     warnings: list[str]
     data_line: str
-    extra_sections: list[tuple[str, str]] = field(default_factory=list)
+    extra_sections: list[str] = field(default_factory=list)
     json_href: str = ""
 
 
@@ -728,10 +630,11 @@ def _page(report: dict[str, Any], title: str) -> Page:
         if key in _KNOWN:
             continue
         text = _statement(value)
+        heading = _SECTION_TITLES.get(key, key.replace("_", " ").capitalize())
         if text is not None:
-            statements.append((key, text))
+            statements.append((heading, plain(text)))
         else:
-            extra.append((key, json.dumps(value, indent=1, default=str)[:20000]))
+            extra.append(heading)
     data = _section(report, "data")
     base = _section(report, "baseline")
     start, end = (str(data.get(k, "?"))[:19].replace("T", " ") for k in ("start", "end"))
@@ -745,15 +648,18 @@ def _page(report: dict[str, Any], title: str) -> Page:
         data_line += "; the calibration in service as a prior"
     prov = _section(report, "provenance")
     payload = json.dumps(report, indent=1, default=str).encode("utf-8")
+    screen = first_screen(report)
     return Page(
         title=title,
-        verdict=str(report.get("verdict", "none")),
-        headline=_headline(report, effects),
+        verdict=screen.verdict,
+        headline=screen.headline,
         where_sentence=_where_sentence(report.get("where")),
         where_after=_where_sentence(where_final) if isinstance(where_final, dict) else None,
-        confidence=_confidence(report),
+        size=screen.size,
+        separable=screen.separable,
+        how_sure=screen.how_sure,
         statements=statements,
-        next_steps=_next_steps(report),
+        next_steps=screen.next_steps,
         evidence=figures,
         more_figures=more,
         selected=[e for e in effects if e.selected],
@@ -780,3 +686,21 @@ def report_html(report: dict[str, Any], *, title: str = "orbitcal diagnosis") ->
         The page's title (e.g. naming the spacecraft).
     """
     return str(_template().render(page=_page(report, title)))
+
+
+def first_screen_html(report: Mapping[str, Any]) -> str:
+    """The first screen's claims as an HTML fragment (a notebook's view of a report): what is
+    wrong, its size, how sure and what to do next, as :func:`report_html` states them."""
+    screen = first_screen(report)
+    rows = [("What is wrong", _esc(screen.headline))]
+    if screen.size:
+        rows.append(("Size", str(_code(screen.size))))
+    rows.append(("How sure", "<br>".join(_esc(line) for line in screen.how_sure)))
+    steps = "".join(f"<li>{_code(step)}</li>" for step in screen.next_steps)
+    rows.append(("What to do next", f'<ul style="margin:0;padding-left:1.1em">{steps}</ul>'))
+    body = "".join(
+        f'<tr><th style="text-align:left;vertical-align:top">{k}</th>'
+        f'<td style="text-align:left">{v}</td></tr>'
+        for k, v in rows
+    )
+    return f'<table class="orbitcal-report">{body}</table>'

@@ -18,11 +18,18 @@ def f64(value: float) -> str:
 
 
 def loss_lines(
-    info: ProductInfo, *, carries: str, exact: bool, loss: HeldOutLoss | None, which: str
+    info: ProductInfo,
+    *,
+    carries: str,
+    exact: bool,
+    loss: HeldOutLoss | None,
+    which: str,
+    bound: str | None = None,
 ) -> list[str]:
     """Sentences saying what a reduced form carries and what it gives on held-out data.
 
-    ``which`` is ``"affine"`` or ``"diagonal"``.
+    ``which`` is ``"affine"`` or ``"diagonal"``; ``bound``: what the coefficients alone say of
+    the loss, stated when no telemetry measured it.
     """
     full = "n/a" if info.holdout_rms_nt is None else f"{info.holdout_rms_nt:.6g} nT"
     lines = [f"carries: {carries}"]
@@ -32,8 +39,11 @@ def loss_lines(
     lines.append(f"this is less than the whole {info.method} model (held-out RMS {full})")
     if loss is None:
         lines.append(
-            "held-out RMS of this form: not measured (export with --telemetry to state it)"
+            "held-out RMS of this form: not measured (export with --telemetry TABLE, and --tle "
+            "when the table has no positions, to state it)"
         )
+        if bound:
+            lines.append(bound)
     else:
         reduced = loss.affine_rms_nt if which == "affine" else loss.diagonal_rms_nt
         worst = loss.affine_max_abs_diff_nt if which == "affine" else loss.diagonal_max_abs_diff_nt

@@ -35,6 +35,32 @@ def evaluate_diagonal(form: AffineForm | NetworkForm, b_raw_nt: FloatArray) -> F
     return out
 
 
+#: The largest field a LEO magnetometer sees [nT] (|B| at the surface near the poles is ~66,000
+#: nT; at 300 km and above less): the scale of the bound of :func:`dropped_terms_bound`.
+LEO_FIELD_MAX_NT = 65_000.0
+
+
+def dropped_terms_bound(form: AffineForm | NetworkForm) -> str:
+    """What the coefficients alone say of the diagonal polynomials' loss: the dropped
+    off-diagonal terms change a component by at most ``sum_j≠i |M_ij| · 65,000 nT``; dropped
+    housekeeping terms and a network's nonlinear part cannot be bounded without telemetry."""
+    aff = affine_part(form)
+    off = np.abs(aff.M - np.diag(np.diag(aff.M))).sum(axis=1) * LEO_FIELD_MAX_NT
+    text = (
+        "without telemetry, from the coefficients alone: the dropped cross-axis terms change "
+        f"x, y, z by at most {', '.join(f'{v:.3g}' for v in off)} nT at a field of "
+        f"{LEO_FIELD_MAX_NT:,.0f} nT (the worst case; an orbit's RMS is smaller)"
+    )
+    unbounded = []
+    if aff.hk_names:
+        unbounded.append(f"the housekeeping terms ({', '.join(aff.hk_names)})")
+    if isinstance(form, NetworkForm):
+        unbounded.append("the network's nonlinear part")
+    if unbounded:
+        text += f"; {' and '.join(unbounded)} cannot be bounded without telemetry"
+    return text
+
+
 def render_polynomial(
     form: AffineForm | NetworkForm, info: ProductInfo, options: ExportOptions
 ) -> bytes:
@@ -71,7 +97,12 @@ def render_polynomial(
         "orbitcal_export": "polynomial",
         "product": info.to_json(),
         "notes": loss_lines(
-            info, carries=carries, exact=exact, loss=options.loss, which="diagonal"
+            info,
+            carries=carries,
+            exact=exact,
+            loss=options.loss,
+            which="diagonal",
+            bound=dropped_terms_bound(form),
         ),
         "held_out": None if options.loss is None else options.loss.to_json(),
         "axes": axes,

@@ -67,7 +67,7 @@ def write_chunks(path: str | Path, chunks: Iterable[Telemetry]) -> int:
         for tel in chunks:
             if not len(tel):
                 continue
-            batch = pa.Table.from_pandas(tel.to_frame(), preserve_index=False)
+            batch = pa.Table.from_pandas(tel.to_table_frame(), preserve_index=False)
             if writer is None:
                 if fmt == "parquet":
                     writer = pq.ParquetWriter(tmp, batch.schema)

@@ -195,7 +195,7 @@ def _table(
     first, last = utc_s_to_iso([t[0], t[-1]])
     summary.first_utc, summary.last_utc = first, last
     summary.columns = (
-        list(tel.to_frame().columns)
+        list(tel.to_table_frame().columns)
         if len(tel) < 2
         else ["time", "b_x", "b_y", "b_z", "q_w", "q_x", "q_y", "q_z", "r_x", "r_y", "r_z"]
     )

@@ -189,7 +189,19 @@ class Telemetry:
         return x_hk, names
 
     def to_frame(self) -> pd.DataFrame:
-        """The table with the contract's columns (``time`` as ISO-8601 UTC with ``Z``)."""
+        """The samples by UTC time (a tz-aware ``DatetimeIndex`` named ``time``, as
+        ``CalibrationRun.to_frame()`` and ``Truth.to_frame()``), the contract's other columns
+        beside it; :func:`orbitcal.read_table` takes it back. For the contract's table with
+        ``time`` as an ISO-8601 column (what the writers write): :meth:`to_table_frame`."""
+        from orbitcal.notebook import time_index
+
+        frame = self.to_table_frame().drop(columns="time")
+        frame.index = time_index(self.t_utc_s)
+        return frame
+
+    def to_table_frame(self) -> pd.DataFrame:
+        """The table with the contract's columns (``time`` as ISO-8601 UTC with ``Z``) on a
+        row-number index: what the writers write."""
         data: dict[str, Any] = {"time": iso_z(self.t_utc_s)}
         for j, c in enumerate(("b_x", "b_y", "b_z")):
             data[c] = self.b_raw_nt[:, j]
@@ -210,11 +222,9 @@ class Telemetry:
 
     def to_xarray(self) -> Any:
         """The table as an xarray Dataset indexed by UTC time (needs the optional xarray)."""
-        from orbitcal.notebook import frame_to_xarray, time_index
+        from orbitcal.notebook import frame_to_xarray
 
-        frame = self.to_frame().drop(columns="time")
-        frame.index = time_index(self.t_utc_s)
-        return frame_to_xarray(frame)
+        return frame_to_xarray(self.to_frame())
 
     def __repr__(self) -> str:
         from orbitcal.notebook import telemetry_repr

@@ -34,7 +34,7 @@ def write_telemetry(path: str | Path, telemetry: Telemetry) -> None:
         The table.
     """
     fmt = format_from_path(path)
-    df = telemetry.to_frame()
+    df = telemetry.to_table_frame()
     Path(path).write_bytes(_encode_frame(df, fmt))
 
 

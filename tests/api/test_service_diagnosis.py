@@ -33,7 +33,7 @@ def test_diagnosis_over_http_names_the_injected_magnetorquer_coupling(tmp_path: 
     )
     assert world.tle is not None
     buf = io.BytesIO()
-    world.telemetry.to_frame().to_parquet(buf, index=False)
+    world.telemetry.to_table_frame().to_parquet(buf, index=False)
     settings = sqlite_settings(tmp_path, window_s=86400.0)
     with live_server(settings) as s, s.client() as c:
         r = c.post(
@@ -94,7 +94,7 @@ def test_diagnosis_of_ten_samples_is_a_422_that_says_what_to_do(tmp_path: Path) 
     )
     assert world.tle is not None and len(world.telemetry) == 10
     buf = io.BytesIO()
-    world.telemetry.to_frame().to_parquet(buf, index=False)
+    world.telemetry.to_table_frame().to_parquet(buf, index=False)
     settings = sqlite_settings(tmp_path, window_s=86400.0)
     with live_server(settings) as s, s.client() as c:
         tle = f"{world.tle.line1}\n{world.tle.line2}"
