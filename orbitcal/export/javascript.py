@@ -12,6 +12,7 @@ outputs ``cal_x, cal_y, cal_z`` [nT]. ``tanh`` is written with ``Math.exp`` (ES5
 
 from __future__ import annotations
 
+from orbitcal.export.names import js_comment
 from orbitcal.export.product import AffineForm, NetworkForm
 
 __all__ = ["INPUT_RAW", "OUTPUTS", "algorithm_text", "hk_inputs"]
@@ -38,7 +39,7 @@ def _vector(prefix: str, n: int) -> str:
 def algorithm_text(form: AffineForm | NetworkForm, header: list[str]) -> str:
     """The algorithm text (function body) computing ``cal_*`` from the inputs."""
     k = len(form.hk_names)
-    lines = [f"// {h}" for h in header]
+    lines = [f"// {js_comment(h)}" for h in header]
     lines.append(
         "var x = [raw_x.value, raw_y.value, raw_z.value"
         + "".join(f", hk_{j}.value" for j in range(k))

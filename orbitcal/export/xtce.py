@@ -25,6 +25,7 @@ import xml.etree.ElementTree as ET
 
 from orbitcal.export._text import f64, loss_lines
 from orbitcal.export.javascript import INPUT_RAW, OUTPUTS, algorithm_text, hk_inputs
+from orbitcal.export.names import xml_text
 from orbitcal.export.options import ExportError, ExportOptions
 from orbitcal.export.product import (
     AffineForm,
@@ -138,7 +139,7 @@ def _describe(
     """The SpaceSystem's LongDescription and Header with its notes (the product, what the
     affine part carries and what it loses)."""
     desc = _sub(root, "LongDescription")
-    desc.text = (
+    desc.text = xml_text(
         f"orbitcal magnetometer calibration of {info.spacecraft}, version {info.version} "
         f"({info.method}). The JavaScript algorithm MagCalibration carries the whole "
         "calibration; the MathAlgorithms *_LIN carry its affine part."
@@ -147,7 +148,7 @@ def _describe(
         root,
         "Header",
         version=str(info.version),
-        date=info.created_at,
+        date=xml_text(info.created_at),
         classification="NotClassified",
         validationStatus="Working",
     )
@@ -162,7 +163,7 @@ def _describe(
     for line in info.lines() + loss_lines(
         info, carries=carries, exact=exact, loss=options.loss, which="affine"
     ):
-        _sub(notes, "Note").text = line
+        _sub(notes, "Note").text = xml_text(line)
     if options.loss is not None:
         _sub(notes, "Note").text = (
             f"held-out RMS of the JavaScript algorithm (whole calibration): "
@@ -211,7 +212,7 @@ def _parameters(
     values = coefficient_values(form, info, options)
     for name, value in values.items():
         if isinstance(value, str):
-            param(name, "Text", "local", value)
+            param(name, "Text", "local", xml_text(value))
         elif isinstance(value, int):
             param(name, "Version", "local", str(value))
         else:
