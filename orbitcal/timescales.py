@@ -29,6 +29,7 @@ import pandas as pd
 
 from orbitcal.arrays import FloatArray
 from orbitcal.errors import BadInputError
+from orbitcal.numtext import parse_real_text
 
 if TYPE_CHECKING:  # pragma: no cover
     from skyfield.timelib import Time, Timescale
@@ -462,8 +463,10 @@ def parse_instant_utc_s(value: float | str, *, field: str, numeric_text: bool = 
     field : str
         The option or key the value came from; the error names it.
     numeric_text : bool
-        Also read a string holding a number (``"1659312000"``, ``"nan"``) as POSIX seconds, before
-        trying ISO-8601 (for values that arrive as text, such as URL query parameters).
+        Also read a string holding a number in ASCII decimals (``"1659312000"``,
+        :mod:`orbitcal.numtext`) as POSIX seconds, before trying ISO-8601 (for values that arrive
+        as text, such as URL query parameters); ``"1_000"``, ``"+1"``, ``" 1"``, ``"١٢"`` are
+        neither.
 
     Returns
     -------
@@ -482,9 +485,11 @@ def parse_instant_utc_s(value: float | str, *, field: str, numeric_text: bool = 
 
     if isinstance(value, str) and numeric_text:
         with contextlib.suppress(ValueError):  # not a number: read as ISO-8601 below
-            value = float(value)
+            value = parse_real_text(value)
     if isinstance(value, str):
         try:
+            if not value.isascii():  # other scripts' digits are not a time either
+                raise ValueError(value)
             stamp = datetime.fromisoformat(value.strip())
         except ValueError:
             raise bad(f"{value[:40]!r} is not an ISO-8601 time") from None
