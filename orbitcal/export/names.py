@@ -41,6 +41,7 @@ __all__ = [
     "cosmos_token",
     "default_hk_name",
     "is_c_identifier",
+    "is_cosmos_item",
     "is_js_identifier",
     "js_comment",
     "safe_text",
@@ -85,16 +86,27 @@ def check_name(name: str, option: str, *, qualified: bool = True) -> str:
 
 def default_hk_name(column: str) -> str:
     """The parameter name of housekeeping column ``column`` when ``hk_names`` gives none: the
-    column upper-cased, every character outside ``[A-Z0-9_-]`` replaced by ``_``, a leading
-    ``_`` when it would start with a digit or ``-``, cut to :data:`NAME_MAX_CHARS`.
+    column upper-cased, every run of characters outside ``[A-Z0-9-]`` replaced by one ``_``,
+    no trailing ``_`` (COSMOS refuses ``__`` and a trailing ``_`` in item names), ``HK_`` in
+    front when it would start with a digit or ``-`` (``HK`` when nothing is left), cut to
+    :data:`NAME_MAX_CHARS`.
 
     Deterministic, so the same column always gets the same name; two columns that end with the
     same name are refused by :func:`check_export_names` (name them with ``hk_names``).
     """
-    name = re.sub(r"[^A-Z0-9_\-]", "_", column.upper(), flags=re.ASCII)
-    if not name or not (name[0].isalpha() or name[0] == "_"):
-        name = "_" + name
-    return name[:NAME_MAX_CHARS]
+    name = re.sub(r"[^A-Z0-9\-]+", "_", column.upper(), flags=re.ASCII)
+    name = name[:NAME_MAX_CHARS].rstrip("_")
+    if not name:
+        return "HK"
+    if not (name[0].isalpha() or name[0] == "_"):
+        name = ("HK_" + name)[:NAME_MAX_CHARS].rstrip("_")
+    return name
+
+
+def is_cosmos_item(name: str) -> bool:
+    """A COSMOS item name (openc3 ``ConfigParser.verify_parameter_naming``: no ``__``, no
+    trailing ``_``) that is also a :data:`NAME`."""
+    return bool(NAME.fullmatch(name)) and "__" not in name and not name.endswith("_")
 
 
 def is_c_identifier(name: str) -> bool:
@@ -140,17 +152,27 @@ def check_export_names(
     entries += [(n, f"the export's own parameter {n}") for n in own]
     for name, where in entries:
         k = key(name)
+        if target == "cosmos" and not where.startswith("the export") and not is_cosmos_item(k):
+            raise ExportError(
+                f"cosmos export: {where} gives item {k!r}, which COSMOS refuses (an item name "
+                "has no '__' and does not end with '_'); rename with raw_names, cal_names or "
+                "hk_names",
+                field=_field(where),
+            )
         if k in seen:
-            field = "hk_names" if "hk column" in where else where.split("[")[0]
-            if field.startswith("the export"):
-                field = "names"
             raise ExportError(
                 f"{target} export: {k} named twice, by {seen[k]} and by {where}; every raw, "
                 "housekeeping and calibrated name must differ from the others and from the "
                 "export's own parameters (rename with raw_names, cal_names or hk_names)",
-                field=field,
+                field=_field(where),
             )
         seen[k] = where
+
+
+def _field(where: str) -> str:
+    if "hk column" in where:
+        return "hk_names"
+    return "names" if where.startswith("the export") else where.split("[")[0]
 
 
 def safe_text(text: str, also: str = "") -> str:
