@@ -492,7 +492,8 @@ def parse_instant_utc_s(value: float | str, *, field: str, numeric_text: bool = 
                 raise ValueError(value)
             stamp = datetime.fromisoformat(value.strip())
         except ValueError:
-            raise bad(f"{value[:40]!r} is not an ISO-8601 time") from None
+            nor = " nor a number in ASCII decimals" if numeric_text else ""
+            raise bad(f"{value[:40]!r} is not an ISO-8601 time{nor}") from None
         if stamp.tzinfo is None:
             raise bad("the time needs a UTC offset (e.g. a trailing 'Z')")
         seconds = stamp.timestamp()

@@ -29,6 +29,8 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable
 
+from orbitcal.export.errors import ExportError
+
 __all__ = [
     "NAME",
     "NAME_MAX_CHARS",
@@ -70,8 +72,6 @@ _JS_RESERVED = frozenset(
 def check_name(name: str, option: str, *, qualified: bool = True) -> str:
     """``name`` if it is a parameter name (or, with ``qualified``, a ``/SYS/NAME`` reference);
     else :class:`~orbitcal.export.options.ExportError` naming ``option``."""
-    from orbitcal.export.options import ExportError
-
     ok = NAME.fullmatch(name) or (qualified and QUALIFIED.fullmatch(name))
     if not ok or len(name) > NAME_MAX_CHARS:
         shown = safe_text(name[:60]) + ("..." if len(name) > 60 else "")
@@ -139,7 +139,6 @@ def check_export_names(
     compares item names (the last path element, case-insensitively); the others compare the
     names as written.
     """
-    from orbitcal.export.options import ExportError
 
     def key(name: str) -> str:
         return name.rsplit("/", 1)[-1].upper() if target == "cosmos" else name

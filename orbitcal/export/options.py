@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from orbitcal.errors import BadInputError
+from orbitcal.export.errors import ExportError
 from orbitcal.export.names import check_name, default_hk_name
 
 __all__ = [
@@ -28,10 +28,6 @@ __all__ = [
 FORMATS = ("json", "xtce", "yamcs-push", "cosmos", "c-header", "polynomial")
 DEFAULT_RAW_NAMES = ("MAG_X_RAW", "MAG_Y_RAW", "MAG_Z_RAW")
 DEFAULT_CAL_NAMES = ("MAG_X_CAL", "MAG_Y_CAL", "MAG_Z_CAL")
-
-
-class ExportError(BadInputError):
-    """An export cannot be made as asked (bad option, names, target answer); names the field."""
 
 
 def _check_name(name: str, option: str) -> str:
