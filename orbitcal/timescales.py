@@ -452,6 +452,9 @@ def _datetime_series_to_s(dt: pd.Series | pd.DatetimeIndex) -> FloatArray:
 MAX_ABS_INSTANT_S = 1e11
 
 
+_NON_FINITE = frozenset(s + w for s in ("", "+", "-") for w in ("nan", "inf", "infinity"))
+
+
 def parse_instant_utc_s(value: float | str, *, field: str, numeric_text: bool = False) -> float:
     """One instant a user gave (e.g. an end of a time range): ISO-8601 with a UTC offset, or
     POSIX seconds.
@@ -484,6 +487,8 @@ def parse_instant_utc_s(value: float | str, *, field: str, numeric_text: bool = 
         return BadInputError(f"{field}: {why}", field=field)
 
     if isinstance(value, str) and numeric_text:
+        if value.lower() in _NON_FINITE:  # what float() reads: said as such, never a time
+            raise bad(f"{value} is not a finite time within ±1e11 s of 1970")
         with contextlib.suppress(ValueError):  # not a number: read as ISO-8601 below
             value = parse_real_text(value)
     if isinstance(value, str):
