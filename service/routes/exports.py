@@ -148,6 +148,9 @@ def export_response(
             cal_names=options.cal_names,
             hk_names=options.hk_names,
         )
+        from orbitcal.export.api import check_names
+
+        check_names(calibration_form(doc), product_info(doc), opts)  # as export() does
         body = set_request(calibration_form(doc), product_info(doc), opts)
         return Response(
             orjson.dumps(body, option=orjson.OPT_INDENT_2),

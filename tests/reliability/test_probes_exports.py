@@ -214,6 +214,13 @@ NAME_PROBES = [
         says=("named twice",),
     ),
     _get(
+        "yamcs-push-raw-is-coefficient",
+        "names-collide",
+        CAL + "?format=yamcs-push&raw_names=MAGCAL_O_0,B,C",
+        422,
+        says=("named twice",),
+    ),
+    _get(
         "cosmos-raw-same-item",
         "names-collide",
         CAL + "?format=cosmos&raw_names=/A/X,/B/X,/C/X",
@@ -372,9 +379,21 @@ def test_new_key_is_not_stored_by_caches(world: World) -> None:
         raise
 
 
+@pytest.fixture(params=["sqlite", pytest.param("postgresql", marks=pytest.mark.services)])
+def any_server(
+    request: pytest.FixtureRequest, world: World, tmp_path: Path
+) -> Iterator[ServeProcess]:
+    """The module's SQLite server, or a fresh one on PostgreSQL (its row lock ``FOR SHARE``)."""
+    if request.param == "sqlite":
+        yield world.server
+        return
+    with serve_process(tmp_path, database="postgresql") as server:
+        yield server
+
+
 @pytest.mark.slow
-def test_key_revoked_during_a_trickled_upload(world: World) -> None:
-    server = world.server
+def test_key_revoked_during_a_trickled_upload(any_server: ServeProcess) -> None:
+    server = any_server
     sc = server.new_spacecraft("revoke")
     with server.client() as http:
         made = http.post("/v1/keys", json={"name": "ingest", "scopes": [f"ingest:{sc}"]}).json()
