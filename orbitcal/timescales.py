@@ -29,6 +29,7 @@ import pandas as pd
 
 from orbitcal.arrays import FloatArray
 from orbitcal.errors import BadInputError
+from orbitcal.numtext import parse_real_text
 
 if TYPE_CHECKING:  # pragma: no cover
     from skyfield.timelib import Time, Timescale
@@ -451,6 +452,9 @@ def _datetime_series_to_s(dt: pd.Series | pd.DatetimeIndex) -> FloatArray:
 MAX_ABS_INSTANT_S = 1e11
 
 
+_NON_FINITE = frozenset(s + w for s in ("", "+", "-") for w in ("nan", "inf", "infinity"))
+
+
 def parse_instant_utc_s(value: float | str, *, field: str, numeric_text: bool = False) -> float:
     """One instant a user gave (e.g. an end of a time range): ISO-8601 with a UTC offset, or
     POSIX seconds.
@@ -462,8 +466,10 @@ def parse_instant_utc_s(value: float | str, *, field: str, numeric_text: bool = 
     field : str
         The option or key the value came from; the error names it.
     numeric_text : bool
-        Also read a string holding a number (``"1659312000"``, ``"nan"``) as POSIX seconds, before
-        trying ISO-8601 (for values that arrive as text, such as URL query parameters).
+        Also read a string holding a number in ASCII decimals (``"1659312000"``,
+        :mod:`orbitcal.numtext`) as POSIX seconds, before trying ISO-8601 (for values that arrive
+        as text, such as URL query parameters); ``"1_000"``, ``"+1"``, ``" 1"``, ``"١٢"`` are
+        neither.
 
     Returns
     -------
@@ -481,13 +487,18 @@ def parse_instant_utc_s(value: float | str, *, field: str, numeric_text: bool = 
         return BadInputError(f"{field}: {why}", field=field)
 
     if isinstance(value, str) and numeric_text:
+        if value.lower() in _NON_FINITE:  # what float() reads: said as such, never a time
+            raise bad(f"{value} is not a finite time within ±1e11 s of 1970")
         with contextlib.suppress(ValueError):  # not a number: read as ISO-8601 below
-            value = float(value)
+            value = parse_real_text(value)
     if isinstance(value, str):
         try:
+            if not value.isascii():  # other scripts' digits are not a time either
+                raise ValueError(value)
             stamp = datetime.fromisoformat(value.strip())
         except ValueError:
-            raise bad(f"{value[:40]!r} is not an ISO-8601 time") from None
+            nor = " nor a number in ASCII decimals" if numeric_text else ""
+            raise bad(f"{value[:40]!r} is not an ISO-8601 time{nor}") from None
         if stamp.tzinfo is None:
             raise bad("the time needs a UTC offset (e.g. a trailing 'Z')")
         seconds = stamp.timestamp()

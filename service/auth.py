@@ -30,6 +30,7 @@ __all__ = [
     "SPACECRAFT_ID_PATTERN",
     "SPACECRAFT_ID_RE",
     "Principal",
+    "check_key_before_commit",
     "create_key",
     "is_loopback",
     "principal",
@@ -172,6 +173,35 @@ async def principal(
     if who is None:
         raise _unauthorised(request, "unknown or revoked API key")
     return who
+
+
+def check_key_before_commit(conn: Any, request: Request) -> None:
+    """Raise 401 when the request's key was revoked since the request was authenticated.
+
+    Called inside a write transaction right before it commits (a telemetry upload's body may
+    arrive for minutes after its key was checked; issue 44). The key's row is read ``FOR
+    SHARE`` where the database has it (PostgreSQL), so a concurrent revocation waits for this
+    commit and the upload is wholly before or wholly refused; SQLite serialises writers anyway.
+    The bootstrap admin key and authentication off have no row to revoke.
+    """
+    state = service_state(request)
+    presented = request.headers.get("x-api-key")
+    if not state.settings.auth or not presented:
+        return
+    key_hash = hash_key(presented)
+    if state.admin_key_hash is not None and hmac.compare_digest(key_hash, state.admin_key_hash):
+        return
+    revoked = conn.execute(
+        sa.select(ApiKey.revoked).where(ApiKey.key_hash == key_hash).with_for_update(read=True)
+    ).scalar_one_or_none()
+    if revoked is None or revoked:
+        state.key_cache.pop(key_hash, None)
+        raise HTTPException(
+            status_code=401,
+            detail="the API key was revoked while the request was being received; "
+            "nothing was stored",
+            headers={"WWW-Authenticate": "X-API-Key"},
+        )
 
 
 def require_scope(action: str) -> object:

@@ -192,6 +192,11 @@ def test_one_instant_from_a_user_iso_or_seconds_and_errors_name_the_field() -> N
         ("yesterday", True, "'yesterday' is not an ISO-8601 time"),
         ("2022-08-01T00:00:00", False, "needs a UTC offset"),
         ("nan", True, "nan is not a finite time within ±1e11 s of 1970"),
+        ("-Infinity", True, "-Infinity is not a finite time"),
+        ("1_000", True, "'1_000' is not an ISO-8601 time nor a number"),  # issue 44
+        ("١٢", True, "nor a number in ASCII decimals"),
+        (" 12", True, "nor a number in ASCII decimals"),
+        ("+12", True, "nor a number in ASCII decimals"),
         (float("-inf"), False, "-inf is not a finite time"),
         (1e300, False, "1e+300 is not a finite time"),
         (10**400, False, "is not a finite time"),  # too large for a float: no OverflowError

@@ -23,7 +23,29 @@ from orbitcal.export.product import (
 if TYPE_CHECKING:
     from orbitcal.telemetry import Telemetry
 
-__all__ = ["export", "held_out_loss", "hk_columns"]
+__all__ = ["check_names", "export", "held_out_loss", "hk_columns"]
+
+
+def check_names(form: AffineForm | NetworkForm, info: Any, options: ExportOptions) -> None:
+    """Refuse (:class:`ExportError`) an export whose names are the same in its target's eyes:
+    raw, housekeeping (given or derived from the columns) and calibrated names, and, for XTCE
+    and ``yamcs-push``, the ``*_LIN`` outputs and every coefficient parameter it defines
+    (:func:`orbitcal.export.names.check_export_names`)."""
+    from orbitcal.export.names import check_export_names
+
+    own: list[str] = []
+    if options.format in ("xtce", "yamcs-push"):
+        from orbitcal.export.xtce import coefficient_values, lin_name
+
+        own = [lin_name(n) for n in options.cal_names]
+        own += list(coefficient_values(form, info, options))
+    check_export_names(
+        raw=options.raw_names,
+        cal=options.cal_names,
+        hk=[(c, options.hk_parameter(c)) for c in form.hk_names],
+        target=options.format,
+        own=own,
+    )
 
 
 def hk_columns(form: AffineForm | NetworkForm, telemetry: Telemetry) -> FloatArray | None:
@@ -159,6 +181,7 @@ def export(doc: dict[str, Any], options: ExportOptions, *, transport: Any = None
         content = (json.dumps(doc, indent=2) + "\n").encode()
         return ExportResult("json", media, info.to_json(), content=content, filename=filename)
     form = calibration_form(doc)
+    check_names(form, info, options)
     if options.format in _RENDERERS:
         module, name = _RENDERERS[options.format]
         rendered = getattr(importlib.import_module(module), name)(form, info, options)

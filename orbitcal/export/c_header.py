@@ -19,6 +19,7 @@ from string import Template
 import numpy as np
 
 from orbitcal.export._text import f64, loss_lines
+from orbitcal.export.names import c_comment, c_string
 from orbitcal.export.options import ExportOptions
 from orbitcal.export.product import (
     AffineForm,
@@ -126,7 +127,7 @@ def render_c_header(
         "hk inputs, in order: " + (", ".join(aff.hk_names) if aff.hk_names else "(none)")
     )
     lines = ["/* orbitcal magnetometer calibration table (generated; do not edit)."]
-    lines += [f" * {c}" for c in comment]
+    lines += [f" * {c_comment(c)}" for c in comment]
     lines.append(" */")
     lines += [
         "#ifndef ORBITCAL_MAGCAL_H",
@@ -135,10 +136,10 @@ def render_c_header(
         "#include <stdint.h>",
         "",
         f"#define ORBITCAL_MAGCAL_VERSION {info.version}",
-        f'#define ORBITCAL_MAGCAL_SPACECRAFT "{info.spacecraft}"',
-        f'#define ORBITCAL_MAGCAL_METHOD "{info.method}"',
-        f'#define ORBITCAL_MAGCAL_SHA256 "{info.sha256}"',
-        f'#define ORBITCAL_MAGCAL_VALIDITY_START "{info.validity_start}"',
+        f'#define ORBITCAL_MAGCAL_SPACECRAFT "{c_string(info.spacecraft)}"',
+        f'#define ORBITCAL_MAGCAL_METHOD "{c_string(info.method)}"',
+        f'#define ORBITCAL_MAGCAL_SHA256 "{c_string(info.sha256)}"',
+        f'#define ORBITCAL_MAGCAL_VALIDITY_START "{c_string(info.validity_start)}"',
         f"#define ORBITCAL_MAGCAL_N_HK {k}",
         f"#define ORBITCAL_MAGCAL_TABLE_LEN {len(values)}",
         f"#define ORBITCAL_MAGCAL_CRC32_F64 0x{table_crc32(values, single=False):08X}u",

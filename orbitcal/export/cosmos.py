@@ -22,6 +22,7 @@ from __future__ import annotations
 import json
 
 from orbitcal.export._text import f64
+from orbitcal.export.names import cosmos_comment, cosmos_token
 from orbitcal.export.options import ExportOptions
 from orbitcal.export.product import AffineForm, NetworkForm, ProductInfo, layout
 
@@ -140,7 +141,7 @@ def render_cosmos(
     }
     for name, value in coefs.items():
         variables[_var(name)] = f64(value)
-    header = ["# " + line for line in info.lines()]
+    header = ["# " + cosmos_comment(line) for line in info.lines()]
     header.append(
         "# carries: the whole calibration (MagCalibration evaluates the "
         + ("affine model" if isinstance(form, AffineForm) else "network")
@@ -157,12 +158,14 @@ def render_cosmos(
         items += [
             f'  ITEM {name} 0 0 DERIVED "calibrated magnetic field, axis {axis}, body frame"',
             "    UNITS nanotesla nT",
-            f"    READ_CONVERSION mag_calibration.py {axis} {layout(form).replace(' ', '')} "
+            f"    READ_CONVERSION mag_calibration.py {axis} {cosmos_token(layout(form))} "
             f"{' '.join(raw)} {len(hk)} {' '.join(hk)} {args_tail}".replace("  ", " "),
         ]
     tlm = [
-        f"# orbitcal magnetometer calibration of {info.spacecraft} (generated; do not edit),",
-        f"# layout {layout(form)}: a new version of the same layout changes vars.json only.",
+        f"# orbitcal magnetometer calibration of {cosmos_comment(info.spacecraft)} "
+        "(generated; do not edit),",
+        f"# layout {cosmos_comment(layout(form))}: a new version of the same layout changes "
+        "vars.json only.",
         "# orbitcal calibration version <%= magcal_version %>, document SHA-256 "
         "<%= magcal_sha256 %>",
         "SELECT_TELEMETRY <%= magcal_target %> <%= magcal_packet %>",

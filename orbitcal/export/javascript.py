@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import json
 
+from orbitcal.export.names import js_comment
 from orbitcal.export.product import AffineForm, NetworkForm
 
 __all__ = ["INPUT_RAW", "OUTPUTS", "algorithm_text", "hk_inputs"]
@@ -97,7 +98,7 @@ def algorithm_text(
 ) -> str:
     """The algorithm text (function body) computing ``cal_*`` from the inputs."""
     k = len(form.hk_names)
-    lines = [f"// {h}" for h in header]
+    lines = [f"// {js_comment(h)}" for h in header]
     lines += _guard(k, version, layout, system)
     lines.append(
         "var x = [raw_x.value, raw_y.value, raw_z.value"

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import io
-import re
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from orbitcal.errors import BadInputError
+from orbitcal.export.errors import ExportError
+from orbitcal.export.names import NAME, check_name, default_hk_name
 
 __all__ = [
     "DEFAULT_CAL_NAMES",
@@ -35,24 +35,9 @@ YAMCS_INPUTS = ("local", "telemetered", "qualified")
 DEFAULT_RAW_NAMES = ("MAG_X_RAW", "MAG_Y_RAW", "MAG_Z_RAW")
 DEFAULT_CAL_NAMES = ("MAG_X_CAL", "MAG_Y_CAL", "MAG_Z_CAL")
 
-# XTCE NameType forbids '/', ':', '[', ']', '.', spaces; a qualified reference (``/SYS/NAME``)
-# is allowed for parameters defined elsewhere.
-_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_\-]*$")
-_QUALIFIED = re.compile(r"^(/[A-Za-z_][A-Za-z0-9_\-]*)+$")
-
-
-class ExportError(BadInputError):
-    """An export cannot be made as asked (bad option, names, target answer); names the field."""
-
 
 def _check_name(name: str, option: str) -> str:
-    if not (_NAME.match(name) or _QUALIFIED.match(name)):
-        raise ExportError(
-            f"{option}: {name!r} is not a parameter name (letters, digits, '_' or '-', or a "
-            "qualified /SYSTEM/NAME)",
-            field=option,
-        )
-    return name
+    return check_name(name, option)  # the one identifier policy: orbitcal/export/names.py
 
 
 def parse_names(
@@ -135,7 +120,8 @@ class ExportOptions:
         Mission parameter names of the raw [nT] and calibrated [nT] axes (CONTRACT section 7).
     hk_names
         Mission parameter names of the housekeeping inputs, by table column (``temperature``,
-        ``mtq_x``, ``hk_<name>``); a column left out keeps its name upper-cased.
+        ``mtq_x``, ``hk_<name>``); a column left out keeps its name upper-cased, made a name by
+        :func:`orbitcal.export.names.default_hk_name`.
     space_system
         Name of the XTCE SpaceSystem / prefix of the coefficient parameters and variables.
     loss
@@ -173,6 +159,8 @@ class ExportOptions:
         _check_name(self.space_system, "space_system")
         if "/" in self.space_system:
             raise ExportError("space_system must be a plain name", field="space_system")
+        for option in ("cosmos_target", "cosmos_packet"):
+            check_name(getattr(self, option), option, qualified=False)
         for n in (*self.raw_names, *self.cal_names, *self.hk_names.values()):
             _check_name(n, "names")
         self._check_yamcs()
@@ -189,7 +177,7 @@ class ExportOptions:
                 f"--yamcs-inputs: unknown {self.yamcs_inputs!r}; known: {', '.join(YAMCS_INPUTS)}",
                 field="yamcs_inputs",
             )
-        if not _NAME.match(self.yamcs_instance):
+        if NAME.fullmatch(self.yamcs_instance) is None:
             raise ExportError(
                 f"Yamcs instance {self.yamcs_instance!r} must be a plain name (letters, digits, "
                 "'_' or '-')",
@@ -206,7 +194,7 @@ class ExportOptions:
 
     def hk_parameter(self, column: str) -> str:
         """The mission name of housekeeping column ``column``."""
-        return self.hk_names.get(column, column.upper())
+        return self.hk_names.get(column) or default_hk_name(column)
 
 
 @dataclass(frozen=True)

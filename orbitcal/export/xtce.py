@@ -29,6 +29,7 @@ import xml.etree.ElementTree as ET
 
 from orbitcal.export._text import f64, loss_lines
 from orbitcal.export.javascript import INPUT_RAW, OUTPUTS, algorithm_text, hk_inputs
+from orbitcal.export.names import xml_text
 from orbitcal.export.options import ExportError, ExportOptions
 from orbitcal.export.product import (
     AffineForm,
@@ -181,27 +182,29 @@ def _describe(
             f"{options.loss.full_rms_nt:.6g} nT"
         )
     desc = _sub(root, "LongDescription")
-    desc.text = "\n".join(
-        [
-            f"orbitcal magnetometer calibration of {info.spacecraft}, version {info.version} "
-            f"({info.method}). The JavaScript algorithm MagCalibration carries the whole "
-            "calibration; the MathAlgorithms *_LIN carry its affine part. Both compute only when "
-            "every raw and housekeeping input has a value.",
-            VERSION_RULE,
-            *lines,
-        ]
+    desc.text = xml_text(
+        "\n".join(
+            [
+                f"orbitcal magnetometer calibration of {info.spacecraft}, version {info.version} "
+                f"({info.method}). The JavaScript algorithm MagCalibration carries the whole "
+                "calibration; the MathAlgorithms *_LIN carry its affine part. Both compute only "
+                "when every raw and housekeeping input has a value.",
+                VERSION_RULE,
+                *lines,
+            ]
+        )
     )
     header = _sub(
         root,
         "Header",
         version=str(info.version),
-        date=info.created_at,
+        date=xml_text(info.created_at),
         classification="NotClassified",
         validationStatus="Working",
     )
     notes = _sub(header, "NoteSet")
     for line in [VERSION_RULE, *lines]:
-        _sub(notes, "Note").text = line
+        _sub(notes, "Note").text = xml_text(line)
 
 
 def _parameter_types(tm: ET.Element) -> None:
@@ -255,7 +258,7 @@ def _parameters(
     for name, value in values.items():
         what = _COEF_SAYS.get(name.removeprefix(options.space_system + "_"), "coefficient")
         if isinstance(value, str):
-            param(name, "Text", "local", what, value)
+            param(name, "Text", "local", what, xml_text(value))
         elif isinstance(value, int):
             param(name, "Version", "local", what, str(value))
         else:

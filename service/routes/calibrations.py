@@ -16,6 +16,7 @@ import orjson
 import sqlalchemy as sa
 from fastapi import APIRouter, HTTPException, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
+from starlette.datastructures import QueryParams
 from starlette.types import ASGIApp, Receive, Scope, Send
 
 from orbitcal import pipeline
@@ -25,6 +26,7 @@ from service.auth import Principal, require_scope
 from service.deps import EngineDep, SettingsDep, get_spacecraft, iso
 from service.diagnosis_cache import DiagnosisCache
 from service.jobs import create_job
+from service.numeric import ASCII_INTEGER
 from service.routes.exports import FormatQuery, HkQuery, NamesQuery, export_response
 from service.schemas import (
     CalibrationDocument,
@@ -260,7 +262,9 @@ class CalibrationFastPath:
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] == "http" and scope["method"] == "GET":
             match = _CALIBRATION_PATH.fullmatch(scope["path"])
-            if match is not None and b"format=" not in scope.get("query_string", b""):
+            # The route's own query parser (Starlette's, percent-decoding, ``?format`` without
+            # ``=``): any ``format`` at all goes to the route (issue 44).
+            if match is not None and "format" not in QueryParams(scope.get("query_string", b"")):
                 spacecraft_id = match.group(1)
                 hit: ServedCalibration | None = self.state.calibration_cache.get(spacecraft_id)
                 if (
@@ -337,7 +341,7 @@ def residuals(
     engine: EngineDep,
     settings: SettingsDep,
     _who: Annotated[Principal, require_scope("read")],
-    max_points: Annotated[int, Query(ge=10, le=20000)] = 1000,
+    max_points: Annotated[int, Query(ge=10, le=20000), ASCII_INTEGER] = 1000,
 ) -> dict[str, Any]:
     """Residual of the calibration in service against the reference field on the recent window,
     through its full model (network and housekeeping terms included): per axis

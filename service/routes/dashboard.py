@@ -19,6 +19,7 @@ from fastapi.responses import HTMLResponse, RedirectResponse, Response
 
 from service.auth import Principal, require_scope
 from service.deps import EngineDep, get_spacecraft, iso, iso_or_none
+from service.numeric import ASCII_INTEGER
 from service.schemas import ErrorPublic
 from service.state import service_state
 from service.storage import IngestLog, Job, read_tx
@@ -227,7 +228,7 @@ async def activity(
     spacecraft_id: str,
     engine: EngineDep,
     _who: Annotated[Principal, require_scope("read")],
-    max_jobs: Annotated[int, Query(ge=1, le=1000)] = 50,
+    max_jobs: Annotated[int, Query(ge=1, le=1000), ASCII_INTEGER] = 50,
 ) -> dict[str, Any]:
     """What happened to a spacecraft's data, for the dashboard's plots.
 

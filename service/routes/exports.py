@@ -38,6 +38,7 @@ from orbitcal.export import (
 from orbitcal.export.product import is_exact_affine
 from service.auth import Principal, require_scope
 from service.deps import EngineDep, get_spacecraft
+from service.numeric import VersionPath
 from service.schemas import ErrorPublic
 from service.storage import Calibration, read_samples, read_tx
 
@@ -147,6 +148,9 @@ def export_response(
             cal_names=options.cal_names,
             hk_names=options.hk_names,
         )
+        from orbitcal.export.api import check_names
+
+        check_names(calibration_form(doc), product_info(doc), opts)  # as export() does
         body = set_request(calibration_form(doc), product_info(doc), opts)
         return Response(
             orjson.dumps(body, option=orjson.OPT_INDENT_2),
@@ -170,7 +174,7 @@ def export_response(
 )
 async def calibration_version(
     spacecraft_id: str,
-    version: int,
+    version: VersionPath,
     engine: EngineDep,
     _who: Annotated[Principal, require_scope("read")],
     format: FormatQuery = None,
@@ -198,7 +202,7 @@ async def calibration_version(
     return await run_in_threadpool(
         lambda: export_response(
             doc,
-            format or "json",
+            "json" if format is None else format,  # ?format= is a 422, as on /calibration
             raw_names,
             cal_names,
             hk_names,

@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Annotated
 
 import sqlalchemy as sa
-from fastapi import APIRouter, Depends, HTTPException, Request
+from fastapi import APIRouter, Depends, HTTPException, Request, Response
 
 from service.auth import Principal, create_key, require_admin
 from service.deps import EngineDep, iso
@@ -23,8 +23,12 @@ AdminDep = Annotated[Principal, Depends(require_admin)]
 
 
 @router.post("", status_code=201)
-def create_api_key(body: ApiKeyIn, request: Request, _admin: AdminDep) -> ApiKeyCreated:
-    """Create a key with scopes; the key is in this answer only (stored as sha256)."""
+def create_api_key(
+    body: ApiKeyIn, request: Request, response: Response, _admin: AdminDep
+) -> ApiKeyCreated:
+    """Create a key with scopes; the key is in this answer only (stored as sha256), which no
+    cache may keep (``Cache-Control: no-store``)."""
+    response.headers["Cache-Control"] = "no-store"
     key, prefix = create_key(request, body.name, body.scopes)
     return ApiKeyCreated(key=key, prefix=prefix, name=body.name, scopes=sorted(set(body.scopes)))
 

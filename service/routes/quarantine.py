@@ -20,6 +20,7 @@ from orbitcal.errors import BadInputError
 from orbitcal.timescales import parse_instant_utc_s
 from service.auth import Principal, require_scope
 from service.deps import MAX_ROW_ID, EngineDep, get_spacecraft, iso, iso_or_none
+from service.numeric import ASCII_INTEGER
 from service.schemas import ErrorPublic
 from service.storage import (
     DataAudit,
@@ -193,7 +194,9 @@ def list_quarantines(
 @router.delete("/{spacecraft_id}/quarantines/{quarantine_id}", responses=_ERRORS)
 def release(
     spacecraft_id: str,
-    quarantine_id: Annotated[int, Path(ge=1, le=MAX_ROW_ID, description="the quarantine's id")],
+    quarantine_id: Annotated[
+        int, Path(ge=1, le=MAX_ROW_ID, description="the quarantine's id"), ASCII_INTEGER
+    ],
     engine: EngineDep,
     who: Annotated[Principal, require_scope("ingest")],
 ) -> QuarantinePublic:
@@ -258,7 +261,7 @@ def data_audit(
     spacecraft_id: str,
     engine: EngineDep,
     _who: Annotated[Principal, require_scope("read")],
-    limit: Annotated[int, Query(ge=1, le=10000)] = 1000,
+    limit: Annotated[int, Query(ge=1, le=10000), ASCII_INTEGER] = 1000,
 ) -> list[AuditPublic]:
     """Who quarantined, released or deleted which samples, newest first."""
     with read_tx(engine) as conn:

@@ -12,7 +12,7 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import Response
 
 from orbitcal.telemetry import RowError
-from service.auth import Principal, require_scope
+from service.auth import Principal, check_key_before_commit, require_scope
 from service.deps import EngineDep, SettingsDep, get_spacecraft
 from service.ingest import (
     CCSDS_MEDIA_TYPE,
@@ -21,6 +21,7 @@ from service.ingest import (
     parse_body,
     telemetry_row_batches,
 )
+from service.numeric import ASCII_INTEGER
 from service.schemas import ErrorPublic, IngestResult
 from service.storage import insert_samples, log_upload, read_tx, write_tx
 
@@ -98,7 +99,9 @@ async def ingest_telemetry(
         Literal["UTC", "TAI", "GPS"], Query(description="scale of numeric/ISO times in the table")
     ] = "UTC",
     apid: Annotated[
-        int | None, Query(ge=0, lt=2048, description="CCSDS: accept only this APID")
+        int | None,
+        Query(ge=0, lt=2048, description="CCSDS: accept only this APID"),
+        ASCII_INTEGER,
     ] = None,
 ) -> Response:
     """Store a telemetry upload. 200 means the accepted rows are committed (durable).
@@ -139,6 +142,7 @@ async def ingest_telemetry(
                 accepted += insert_samples(conn, sc.pk, rows)
             duplicates = len(parsed.telemetry) - accepted
             log_upload(conn, sc.pk, fmt=fmt, accepted=accepted, duplicates=duplicates, rejected=bad)
+            check_key_before_commit(conn, request)  # revoked while the body arrived: roll back
         if accepted:
             _check_health(request, sc.pk, parsed.telemetry if not duplicates else None)
         head = {"accepted": accepted, "duplicates": duplicates}

@@ -265,7 +265,7 @@ class ServeProcess:
                     probe.path.format(sc=sc),
                     content=body,
                     headers=headers,
-                    params=dict(probe.params),
+                    params=dict(probe.params) or None,  # None: the path's own query stays
                 )
             status, text = r.status_code, r.text
         except httpx.TransportError as exc:  # a dead server, or one that closed on us
