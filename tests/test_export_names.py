@@ -306,7 +306,10 @@ def _expected_parameters(root: ET.Element, options: ExportOptions, columns: list
 
 
 def _js_code(text: str) -> list[str]:
-    return [ln for ln in text.splitlines() if not ln.startswith("//")]
+    """The script without its comments and without the one literal that carries the layout's
+    column names (a JSON string: ``var FILE_LAYOUT = "...";``)."""
+    lines = [ln for ln in text.splitlines() if not ln.startswith("//")]
+    return [ln for ln in lines if not ln.startswith("var FILE_LAYOUT = ")]
 
 
 @settings(max_examples=100)

@@ -56,14 +56,19 @@ def _guard(k: int, version: int, layout: str, system: str) -> list[str]:
     of another version (``seen``: a global of the script engine, one per space system)."""
     names = [*INPUT_RAW, *hk_inputs(k), "version", "layout"]
     seen = f"orbitcal_{system.replace('-', '_')}_seen"
+    # Every piece of text is a JSON literal: names reach the script only as escaped strings.
     event = (
-        f"'{system}: computing with coefficients of version ' + version.value + ', set at run "
-        f"time; this MDB holds version {version}, which every restart serves again (load the "
-        "XTCE of version ' + version.value + ' to keep it)'"
+        f"{json.dumps(system + ': computing with coefficients of version ')} + version.value + "
+        + json.dumps(
+            f", set at run time; this MDB holds version {version}, which every restart serves "
+            "again (load the XTCE of version "
+        )
+        + " + version.value + ' to keep it)'"
     )
     refuse = (
-        f"'{system}: coefficients of layout ' + layout.value + ' refused: this algorithm was "
-        f"generated for {layout}; load the matching XTCE'"
+        f"{json.dumps(system + ': coefficients of layout ')} + layout.value + "
+        "' refused: this algorithm was generated for ' + FILE_LAYOUT + "
+        "'; load the matching XTCE'"
     )
     return [
         f"var FILE_VERSION = {version};",

@@ -23,6 +23,7 @@ import numpy as np
 
 from orbitcal.arrays import FloatArray
 from orbitcal.calibrate.errors import DocumentError
+from orbitcal.export.names import default_hk_name
 
 __all__ = [
     "NETWORK_METHODS",
@@ -322,13 +323,19 @@ def affine_part(form: AffineForm | NetworkForm) -> AffineForm:
 
 
 def layout(form: AffineForm | NetworkForm) -> str:
-    """The shape of a form's coefficient set (``affine:hk=5``, ``network:tanh:in=8:hidden=3``):
-    a generated algorithm or conversion takes new values for the same layout only."""
+    """The shape of a form's coefficient set (``affine:hk=5:...``,
+    ``network:tanh:in=8:hidden=3:...``):
+    a generated algorithm or conversion takes new values for the same layout only.
+
+    The housekeeping columns enter as their default parameter names (plain ASCII, the export's
+    name policy) and a digest of the exact column names, so the layout is safe in any target's
+    text and still tells two sets of columns apart."""
+    names = ",".join(default_hk_name(c) for c in form.hk_names)
+    digest = hashlib.sha256(json.dumps(list(form.hk_names)).encode()).hexdigest()[:8]
+    tail = f"{names}:{digest}" if form.hk_names else ""
     if isinstance(form, AffineForm):
-        return f"affine:hk={len(form.hk_names)}:{','.join(form.hk_names)}"
-    return (
-        f"network:{form.activation}:in={form.n_in}:hidden={form.n_hidden}:{','.join(form.hk_names)}"
-    )
+        return f"affine:hk={len(form.hk_names)}:{tail}"
+    return f"network:{form.activation}:in={form.n_in}:hidden={form.n_hidden}:{tail}"
 
 
 def is_exact_affine(form: AffineForm | NetworkForm) -> bool:

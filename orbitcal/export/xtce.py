@@ -236,7 +236,7 @@ def _parameters(
     def param(name: str, type_ref: str, source: str, what: str, initial: str | None = None) -> None:
         if name.startswith("/"):
             return  # defined in the mission's MDB
-        attrib = {"name": name, "parameterTypeRef": type_ref, "shortDescription": what}
+        attrib = {"name": name, "parameterTypeRef": type_ref, "shortDescription": xml_text(what)}
         if initial is not None:
             attrib["initialValue"] = initial
         p = _sub(params, "Parameter", **attrib)
