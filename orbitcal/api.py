@@ -253,6 +253,7 @@ def apply_calibration(
         Housekeeping columns the calibration uses must be present.
     """
     from orbitcal.pipeline import CalibrationRun, apply_document
+    from orbitcal.plausibility import check_table, table_radius_km
 
     if isinstance(calibration, CalibrationRun):
         document: dict[str, Any] = calibration.document
@@ -260,6 +261,8 @@ def apply_calibration(
         document = json.loads(Path(calibration).read_text())
     else:
         document = dict(calibration)
+    # no orbit here: the dipole range at the table's positions, else surface to GEO
+    check_table(telemetry.b_raw_nt, r_km=table_radius_km(telemetry))
     return apply_document(document, telemetry)
 
 

@@ -220,8 +220,14 @@ def new_app(lifespan: Callable[[FastAPI], Any]) -> FastAPI:
             503: {
                 "model": ErrorPublic,
                 "description": "database unavailable or a resource of the server exhausted "
-                "(disk full, too many open files): nothing was stored, or (connection lost "
-                "during commit) the outcome is unknown and re-sending is safe",
+                "(too many open files, no free connection): nothing was stored, or (connection "
+                "lost during commit) the outcome is unknown and re-sending is safe",
+                "headers": {"Retry-After": {"schema": {"type": "integer"}}},
+            },
+            507: {
+                "model": ErrorPublic,
+                "description": "insufficient storage: the server's disk is full or the database "
+                "file reached its file-size limit; nothing was stored",
                 "headers": {"Retry-After": {"schema": {"type": "integer"}}},
             },
         },

@@ -9,8 +9,9 @@ kinds, in the order a request meets them:
   request cut by the server's timeouts looks like from inside): logged at INFO as what it is,
   answered 499 (nobody reads it), never an ERROR;
 * resources of the machine running out (``ResourceExhausted``, or an ``OSError`` / database
-  error whose cause is ENOSPC, EMFILE, …): 503 naming the resource, logged at ERROR with its
-  name and no traceback;
+  error whose cause is ENOSPC, EFBIG, EMFILE, …): 507 Insufficient Storage for the disk or the
+  file-size limit, 503 for the others, naming the resource; logged at ERROR with its name and
+  no traceback;
 * the database unreachable or lost during COMMIT: 503 with ``Retry-After``;
 * anything else: 500, logged with its traceback.
 """
@@ -27,7 +28,13 @@ from fastapi.responses import JSONResponse, Response
 from starlette.requests import ClientDisconnect
 
 from orbitcal.errors import OrbitcalError
-from service.storage import CommitOutcomeUnknown, ResourceExhausted, resource_problem
+from service.storage import (
+    FILE_SIZE_LIMIT,
+    STORAGE_RESOURCES,
+    CommitOutcomeUnknown,
+    ResourceExhausted,
+    resource_problem,
+)
 
 __all__ = ["add_exception_handlers", "error_response"]
 
@@ -36,6 +43,7 @@ log = logging.getLogger("orbitcal.service")
 #: What the operator should do about each resource, in the 503's detail.
 _RESOURCE_ADVICE = {
     "disk": "the server's disk is full",
+    FILE_SIZE_LIMIT: "the database file reached the server's file-size limit (ulimit -f)",
     "open files": "the server has too many open files",
     "database connections": "the database has no free connection",
     "memory": "the database is out of memory",
@@ -64,8 +72,10 @@ def _resource_exhausted(request: Request, resource: str, exc: BaseException) -> 
             "error": f"{type(exc).__name__}: {exc}"[:300],
         },
     )
+    # Storage full: 507 Insufficient Storage (RFC 4918), the other resources 503.
+    status = 507 if resource in STORAGE_RESOURCES else 503
     return error_response(
-        503,
+        status,
         f"{what} ({resource}): nothing was stored; retry once the operator has freed it",
         [{"reason": f"{resource} exhausted"}],
         headers={"Retry-After": "60"},

@@ -211,3 +211,38 @@ def telemetry_row_batches(
     """:func:`telemetry_to_rows` in slices of ``batch_rows`` (insert them in one transaction)."""
     for start in range(0, len(tel), batch_rows):
         yield telemetry_to_rows(spacecraft_pk, tel.select(slice(start, start + batch_rows)))
+
+
+#: Valid rows an upload needs before a unit mistake refuses it whole (fewer: a warning only).
+PLAUSIBILITY_MIN_ROWS = 20
+
+
+def check_upload_plausible(tel: Telemetry, spacecraft: Any) -> str | None:
+    """Whether the upload's median |B| can be the Earth's field in nT at the spacecraft's
+    altitude (:mod:`orbitcal.plausibility`; the radius from the table's positions, else from the
+    spacecraft's elements).
+
+    Raises :class:`~orbitcal.plausibility.ImplausibleInputError` (422) for a recognisable unit
+    mistake (Tesla, Gauss, µT, …) in an upload of at least :data:`PLAUSIBILITY_MIN_ROWS` valid
+    rows; returns the reason, for the answer's ``warnings``, when the magnitude is implausible
+    otherwise (or the upload is small); None when it is plausible. The retraining refuses such
+    data in any case.
+    """
+    from orbitcal.plausibility import (
+        ImplausibleInputError,
+        elements_radius_km,
+        field_scale_problem,
+    )
+
+    if len(tel) == 0:
+        return None
+    if tel.r_itrs_km is not None:
+        r_km: float | None = float(np.median(np.linalg.norm(tel.r_itrs_km, axis=1)))
+    else:
+        r_km = elements_radius_km(
+            getattr(spacecraft, "tle", None), getattr(spacecraft, "omm", None)
+        )
+    why = field_scale_problem(tel.b_raw_nt, r_km=r_km)
+    if why is not None and len(tel) >= PLAUSIBILITY_MIN_ROWS and "looks like" in why:
+        raise ImplausibleInputError(f"nothing was stored: {why}", field="b_x,b_y,b_z")
+    return why

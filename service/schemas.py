@@ -130,6 +130,8 @@ class IngestResult(BaseModel):
     accepted: int
     duplicates: int
     rejected: list[RowRejection]
+    #: Present when the stored data look implausible (e.g. a median |B| no orbit has).
+    warnings: list[str] | None = None
 
 
 class RetrainIn(BaseModel):

@@ -752,8 +752,9 @@ class CommitOutcomeUnknown(sa.exc.SQLAlchemyError):
 class ResourceExhausted(sa.exc.SQLAlchemyError):
     """The database failed for want of a resource of this machine: nothing was stored.
 
-    ``resource`` names it for the operator: ``"disk"`` (ENOSPC, SQLite "database or disk is
-    full", PostgreSQL 53100), ``"open files"`` (EMFILE/ENFILE) or ``"database connections"``
+    ``resource`` names it for the operator: ``"disk"`` (ENOSPC, EDQUOT, SQLite "database or disk
+    is full", PostgreSQL 53100), ``"file size limit"`` (EFBIG: the process's RLIMIT_FSIZE, which
+    SQLite reports as an I/O error), ``"open files"`` (EMFILE/ENFILE) or ``"database connections"``
     (PostgreSQL 53300). The server answered the failing statement or COMMIT, so the
     transaction was rolled back (unlike :class:`CommitOutcomeUnknown`).
     """
@@ -769,7 +770,25 @@ _PG_RESOURCE_STATES = {
     "53200": "memory",
     "53300": "database connections",
 }
-_ERRNO_RESOURCES = {errno.ENOSPC: "disk", errno.EMFILE: "open files", errno.ENFILE: "open files"}
+#: The resource named when a write fails against this process's RLIMIT_FSIZE (EFBIG).
+FILE_SIZE_LIMIT = "file size limit"
+#: Resources whose exhaustion is the storage's (HTTP 507 Insufficient Storage, not 503).
+STORAGE_RESOURCES = frozenset({"disk", FILE_SIZE_LIMIT})
+_ERRNO_RESOURCES = {
+    errno.ENOSPC: "disk",
+    errno.EDQUOT: "disk",
+    errno.EFBIG: FILE_SIZE_LIMIT,
+    errno.EMFILE: "open files",
+    errno.ENFILE: "open files",
+}
+
+
+def _file_size_limited() -> bool:
+    """Whether this process runs under a finite RLIMIT_FSIZE (ulimit -f)."""
+    import resource
+
+    soft, _ = resource.getrlimit(resource.RLIMIT_FSIZE)
+    return soft != resource.RLIM_INFINITY
 
 
 def _out_of_file_descriptors() -> bool:
@@ -798,6 +817,11 @@ def resource_problem(exc: BaseException) -> str | None:
             return error.resource
         if isinstance(error, OSError) and error.errno in _ERRNO_RESOURCES:
             return _ERRNO_RESOURCES[error.errno]
+        if str(getattr(error, "sqlite_errorname", "")).startswith("SQLITE_IOERR") and (
+            _file_size_limited()
+        ):
+            # SQLite reports a write refused with EFBIG as a plain I/O error
+            return FILE_SIZE_LIMIT
         state = getattr(error, "sqlstate", None) or getattr(error, "pgcode", None)
         if isinstance(state, str) and state in _PG_RESOURCE_STATES:
             return _PG_RESOURCE_STATES[state]

@@ -32,6 +32,14 @@ def push_after_promotion(
     if stale:
         log.warning("yamcs push skipped: stale", extra={"version": document.get("version")})
         return {"skipped": "the calibration is stale (the health check found a change)"}
+    from orbitcal.plausibility import document_problem
+
+    implausible = document_problem(document)
+    if implausible is not None:  # never reaches the ground system, whatever promoted it
+        log.warning(
+            "yamcs push refused", extra={"version": document.get("version"), "reason": implausible}
+        )
+        return {"error": f"not pushed: implausible for a magnetometer in nT: {implausible}"}
     from orbitcal.export import ExportOptions, YamcsTarget, export
 
     target = YamcsTarget(

@@ -70,6 +70,8 @@ PUBLIC: dict[str, list[str]] = {
         "COMMAND_MODULES",
         "CliError",
         "ENTRY_POINT_GROUP",
+        "EXIT_INTERRUPTED",
+        "Interrupted",
         "build_parser",
         "exit_code_for",
         "main",

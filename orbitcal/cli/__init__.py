@@ -15,6 +15,7 @@ status comes from :attr:`orbitcal.errors.OrbitcalError.exit_code`, mapped in one
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import sys
 import warnings
@@ -28,7 +29,9 @@ from orbitcal.errors import BadInputError, OrbitcalError
 __all__ = [
     "COMMAND_MODULES",
     "ENTRY_POINT_GROUP",
+    "EXIT_INTERRUPTED",
     "CliError",
+    "Interrupted",
     "build_parser",
     "exit_code_for",
     "main",
@@ -99,7 +102,18 @@ def exit_code_for(exc: BaseException) -> int | None:
     return None
 
 
+#: errno values that mean the storage is full, and how the CLI names each.
+_STORAGE_FULL = {
+    errno.ENOSPC: "the disk is full",
+    errno.EDQUOT: "the disk quota is exhausted",
+    errno.EFBIG: "the file-size limit (ulimit -f) is reached",
+}
+
+
 def _describe(exc: BaseException) -> str:
+    if isinstance(exc, OSError) and exc.errno in _STORAGE_FULL:
+        where = f" {exc.filename}" if exc.filename is not None else ""
+        return f"cannot write{where}: {_STORAGE_FULL[exc.errno]} ({exc.strerror or exc})"
     if isinstance(exc, OSError) and exc.filename is not None and exc.strerror:
         return f"cannot read {exc.filename}: {exc.strerror}"
     text = str(exc) if not isinstance(exc, KeyError) else str(exc.args[0] if exc.args else exc)
@@ -153,9 +167,63 @@ def unknown_arguments_message(parser: argparse.ArgumentParser, extra: Sequence[s
     return text + (" (" + "; ".join(hints) + ")" if hints else "")
 
 
+#: Exit status after Ctrl-C (128 + SIGINT), as shells report it.
+EXIT_INTERRUPTED = 130
+
+
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C in a command that saved what it finished; the message says where."""
+
+
+class _SigintSeen:
+    """A SIGINT handler that raises ``KeyboardInterrupt`` (as Python's own) and remembers it.
+
+    An extension module interrupted while it initialises (numpy, torch) may turn the
+    ``KeyboardInterrupt`` into ``ImportError: initialization failed``: :func:`main` reads such an
+    error as the interrupt it is when this handler has seen one.
+    """
+
+    def __init__(self) -> None:
+        self.seen = False
+
+    def __call__(self, signum: int, frame: Any) -> None:
+        self.seen = True
+        raise KeyboardInterrupt
+
+
+def _interrupted(command: str, exc: BaseException | None) -> int:
+    note = str(exc) if isinstance(exc, Interrupted) and str(exc) else "nothing saved"
+    print(f"orbitcal {command}: interrupted (Ctrl-C); {note}", file=sys.stderr)
+    return EXIT_INTERRUPTED
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args, extra = parser.parse_known_args(argv)
+    """Run one ``orbitcal`` command; Ctrl-C anywhere (imports included) gives one line and 130."""
+    import signal
+
+    sigint = _SigintSeen()
+    try:
+        previous_handler = signal.signal(signal.SIGINT, sigint)
+    except ValueError:  # not the main thread (a test calling main in a worker): leave it
+        previous_handler = None
+    command = "orbitcal"
+    try:
+        parser = build_parser()
+        args, extra = parser.parse_known_args(argv)
+        command = args.command
+        return _run(parser, args, extra)
+    except KeyboardInterrupt as exc:
+        return _interrupted(command, exc)
+    except ImportError:
+        if sigint.seen:
+            return _interrupted(command, None)
+        raise
+    finally:
+        if previous_handler is not None:
+            signal.signal(signal.SIGINT, previous_handler)
+
+
+def _run(parser: argparse.ArgumentParser, args: argparse.Namespace, extra: list[str]) -> int:
     if extra:
         # the sub-command's usage and the flag meant, not the top-level usage
         sub = _subparser(parser, args.command)

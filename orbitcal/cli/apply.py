@@ -43,6 +43,9 @@ def run(args: argparse.Namespace) -> int:
     except OSError as exc:
         raise CliError(f"cannot read {args.calibration}: {exc.strerror}") from None
     tel = load_table(args, "apply")
+    from orbitcal.plausibility import check_table, table_radius_km
+
+    check_table(tel.b_raw_nt, r_km=table_radius_km(tel))  # Tesla, Gauss: named, not applied
     b_cal = apply_document(doc, tel)
     write_field_csv(args.out, tel.t_utc_s, b_cal)
     import numpy as np

@@ -118,17 +118,34 @@ def run_diagnose(args: argparse.Namespace) -> int:
     console = Console(stderr=True)
     correct = 0
     t0 = time.perf_counter()
+    finished: list[dict[str, object]] = []
+    partial = _partial_path(args)
+
+    def record(out: dict[str, object]) -> None:
+        nonlocal correct
+        finished.append(out)
+        if partial is not None:  # each finished world on disk at once (Ctrl-C, a crash)
+            with partial.open("a") as fh:
+                fh.write(json.dumps(out) + "\n")
+        correct += bool(out["correct"])
+
     if not console.is_terminal:
         # Not a terminal (a pipe, a log file, CI): a bar would draw nothing for the whole run
         # (9.5 min of silence at 240 worlds); one plain line per world instead.
         def on_line(i: int, out: dict[str, object]) -> None:
-            nonlocal correct
-            correct += bool(out["correct"])
+            record(out)
             print(_case_line(i, args.cases, out, correct, time.perf_counter() - t0), flush=True)
 
-        result = run_benchmark(
-            args.cases, seed=args.seed, tle_text=tle_text, n_orbits=args.orbits, progress=on_line
-        )
+        try:
+            result = run_benchmark(
+                args.cases,
+                seed=args.seed,
+                tle_text=tle_text,
+                n_orbits=args.orbits,
+                progress=on_line,
+            )
+        except KeyboardInterrupt:
+            raise _finished_note(partial, len(finished)) from None
     else:
         with Progress(
             TextColumn("[bold]diagnose[/]"),
@@ -141,17 +158,22 @@ def run_diagnose(args: argparse.Namespace) -> int:
             task = progress.add_task("cases", total=args.cases, acc="-")
 
             def on_case(i: int, out: dict[str, object]) -> None:
-                nonlocal correct
-                correct += bool(out["correct"])
+                record(out)
                 progress.update(task, advance=1, acc=f"{correct / (i + 1):.1%}")
 
-            result = run_benchmark(
-                args.cases,
-                seed=args.seed,
-                tle_text=tle_text,
-                n_orbits=args.orbits,
-                progress=on_case,
-            )
+            try:
+                result = run_benchmark(
+                    args.cases,
+                    seed=args.seed,
+                    tle_text=tle_text,
+                    n_orbits=args.orbits,
+                    progress=on_case,
+                )
+            except KeyboardInterrupt:
+                progress.stop()
+                raise _finished_note(partial, len(finished)) from None
+    if partial is not None:
+        partial.unlink(missing_ok=True)  # the whole results follow
     wall = time.perf_counter() - t0
     result["machine"] = _machine(wall)
     s = result["summary"]
@@ -168,6 +190,26 @@ def run_diagnose(args: argparse.Namespace) -> int:
         confusion_png(result["confusion"], out / "diagnose_confusion.png")
         print(f"results written to {out}")
     return 0
+
+
+def _partial_path(args: argparse.Namespace) -> Path | None:
+    """``--out/diagnose_partial.ndjson`` (emptied), where finished worlds go one line each."""
+    if not args.out:
+        return None
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "diagnose_partial.ndjson"
+    path.write_text("")
+    return path
+
+
+def _finished_note(partial: Path | None, n_finished: int) -> KeyboardInterrupt:
+    """The interrupt to raise after Ctrl-C, saying where the finished worlds are."""
+    from orbitcal.cli import Interrupted
+
+    if partial is None:
+        return Interrupted(f"{n_finished} finished worlds not saved (no --out)")
+    return Interrupted(f"{n_finished} finished worlds saved to {partial} (one JSON per line)")
 
 
 def _run_compound(args: argparse.Namespace, tle_text: str) -> int:

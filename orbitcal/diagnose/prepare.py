@@ -216,6 +216,13 @@ def diagnosis_data(
     truth = truth_for_telemetry(
         telemetry, orbit=orbit, attitude_frame=attitude_frame, field=options.field
     )
+    from orbitcal.plausibility import check_table
+
+    # a table in Tesla/Gauss/µT is named, not diagnosed (wrong elements are the orbit_error
+    # effect's to find)
+    check_table(
+        telemetry.b_raw_nt, b_ref_mag_nt=np.linalg.norm(truth.b_itrs_nt, axis=1), orbit=False
+    )
     t = np.asarray(telemetry.t_utc_s, dtype=float)
     rot = rotation_itrs_to_body(t, q_wxyz, attitude_frame=attitude_frame)
     r_itrs = np.asarray(truth.r_itrs_km, dtype=float)

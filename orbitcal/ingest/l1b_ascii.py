@@ -43,6 +43,10 @@ END_OF_HEADER = "# End of YAML header"
 _ORDINAL = re.compile(r"^\s*(\d+)(?:st|nd|rd|th)\s+column\b", re.IGNORECASE)
 _REST = re.compile(r"remaining portion", re.IGNORECASE)
 _MAX_HEADER_LINES = 2000
+#: The longest line (header or record) a reader accepts [bytes]. RL04 records are ~150 bytes; a
+#: longer line (a decompression bomb in a ``.gz`` file, a file that is not L1B) is refused as it
+#: streams past, before pandas' tokenizer or the YAML parser would buffer it whole.
+MAX_LINE_BYTES = 64 * 1024
 
 
 @dataclass(frozen=True)
@@ -86,10 +90,74 @@ class L1BChunk:
         return len(next(iter(self.columns.values()))) if self.columns else 0
 
 
+class _LineBounded(io.RawIOBase):
+    """A byte stream that refuses a line longer than ``MAX_LINE_BYTES`` as it is read.
+
+    The check runs on each block (``bytes.rfind`` in C), so what the stream expands to — a
+    ``.gz`` file decompresses as it is read — is bounded per line, not only in bytes on disk.
+    """
+
+    def __init__(self, raw: IO[bytes], path: Path) -> None:
+        self._raw = raw
+        self._path = path
+        self._run = 0  # bytes since the last line end
+
+    def readable(self) -> bool:
+        return True
+
+    def readinto(self, buffer: Any) -> int:
+        data = self._raw.read(len(buffer))
+        n = len(data)
+        buffer[:n] = data
+        end = data.rfind(b"\n")
+        self._run = self._run + n if end < 0 else n - end - 1
+        if self._run > MAX_LINE_BYTES or (end >= 0 and _longest_line(data) > MAX_LINE_BYTES):
+            raise IngestError(
+                self._path,
+                f"a line longer than {MAX_LINE_BYTES:,} bytes (after decompression): not an "
+                "RL04 ASCII file (the limit MAX_LINE_BYTES bounds what a file expands to)",
+            )
+        return n
+
+    def close(self) -> None:
+        self._raw.close()
+        super().close()
+
+
+def _longest_line(data: bytes) -> int:
+    """The longest run between line ends inside one block (only checked when it could exceed)."""
+    if len(data) <= MAX_LINE_BYTES:
+        return 0
+    return max(map(len, data.split(b"\n")[1:-1]), default=0)
+
+
 def _open_text(path: Path) -> IO[str]:
-    if path.name.endswith(".gz"):
-        return io.TextIOWrapper(gzip.open(path, "rb"), encoding="ascii", errors="strict")
-    return path.open("r", encoding="ascii", errors="strict")
+    raw: Any = gzip.open(path, "rb") if path.name.endswith(".gz") else path.open("rb")  # noqa: SIM115
+    return io.TextIOWrapper(
+        io.BufferedReader(_LineBounded(raw, path)), encoding="ascii", errors="strict"
+    )
+
+
+class _NoAliasLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` without anchors and aliases.
+
+    An alias makes a node stand for another, so ten nested levels of ten aliases each describe
+    10^10 nodes in a header of a kilobyte (a "billion laughs"): any walk over the document
+    (``str()``, a copy, a comparison) then exhausts memory. RL04 headers use no aliases, so the
+    first one is refused, naming its line.
+    """
+
+    def compose_node(self, parent: Any, index: Any) -> Any:
+        if self.check_event(yaml.AliasEvent):
+            event = self.peek_event()
+            raise yaml.composer.ComposerError(
+                None,
+                None,
+                f"a YAML alias (*{event.anchor}): RL04 headers use none, and aliases can expand "
+                "a small header without bound",
+                event.start_mark,
+            )
+        return super().compose_node(parent, index)
 
 
 @dataclass(frozen=True)
@@ -154,7 +222,7 @@ class L1BFile:
         except UnicodeDecodeError as exc:
             raise IngestError(p, f"not ASCII text ({exc.reason})") from exc
         try:
-            doc = yaml.safe_load("".join(lines))
+            doc = yaml.load("".join(lines), Loader=_NoAliasLoader)  # a SafeLoader
         except yaml.YAMLError as exc:
             mark = getattr(exc, "problem_mark", None)
             line_no = None if mark is None else int(mark.line) + 1
@@ -168,7 +236,10 @@ class L1BFile:
             block = header.get(key)
             if isinstance(block, dict):
                 attrs.update(block)
-        platform = str(attrs.get("platform", ""))
+        platform = attrs.get("platform", "")
+        if not isinstance(platform, str | int | float):
+            raise IngestError(p, "the header's platform is not a text value", field="platform")
+        platform = str(platform)
         if platform and not platform.endswith(sat):
             raise IngestError(
                 p,

@@ -255,6 +255,31 @@ def _columns(p: Path, data: dict[str, Any], t_utc_s: FloatArray, spacecraft: str
     )
 
 
+#: What the variables of one CDF may decode to [bytes]: a day of 50 Hz Swarm MAGx_HR is ~0.5 GB.
+#: CDF variables may be compressed (GZIP, RLE), so a small file can declare far more.
+MAX_CDF_DECODED_BYTES = 2 * 2**30
+
+
+def _check_cdf_expansion(p: Path, cdf: Any, names: list[str]) -> None:
+    """Refuse a CDF whose variables, as declared, decode beyond ``MAX_CDF_DECODED_BYTES``."""
+    total = 0
+    for n in names:
+        info = cdf.varinq(n)
+        records = max(int(info.Last_Rec) + 1, 0)
+        per_record = int(info.Num_Elements) * 16  # 16 bytes: the widest CDF type (EPOCH16)
+        for size in info.Dim_Sizes or []:
+            per_record *= max(int(size), 1)
+        total += records * per_record
+        if total > MAX_CDF_DECODED_BYTES:
+            raise IngestError(
+                p,
+                f"its variables declare {total:,} bytes or more once decoded (variable {n}: "
+                f"{records:,} records), over the limit MAX_CDF_DECODED_BYTES = "
+                f"{MAX_CDF_DECODED_BYTES:,}",
+                field=n,
+            )
+
+
 def _read_cdf(p: Path) -> _Columns:
     import cdflib
     from cdflib.epochs import CDFepoch
@@ -262,6 +287,7 @@ def _read_cdf(p: Path) -> _Columns:
     try:
         cdf = cdflib.CDF(str(p))
         names = list(cdf.cdf_info().zVariables) + list(cdf.cdf_info().rVariables)
+        _check_cdf_expansion(p, cdf, names)
         data = {n: cdf.varget(n) for n in names}
     except (OSError, ValueError, KeyError, IndexError, TypeError) as exc:
         raise IngestError(p, f"not a readable CDF file ({exc})") from exc

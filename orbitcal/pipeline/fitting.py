@@ -6,6 +6,7 @@ The fit sees only the earlier time blocks; ``metrics.holdout_rms_nt`` is measure
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, fields
 from dataclasses import field as dataclass_field
@@ -28,6 +29,7 @@ from orbitcal.calibrate.holdout import HOLDOUT_FRACTION, later_block_split
 from orbitcal.pipeline.determination import UndeterminedError, undetermined_reason
 from orbitcal.pipeline.inputs import fit_data_for_telemetry
 from orbitcal.pipeline.scores import Scores, score
+from orbitcal.plausibility import check_table, document_problem
 from orbitcal.telemetry import Telemetry
 
 if TYPE_CHECKING:
@@ -191,6 +193,10 @@ def calibrate(
     data, field_name = fit_data_for_telemetry(
         tel, orbit=orbit, field=field, attitude_frame=attitude_frame
     )
+    # a table in Tesla/Gauss/µT, or on the elements of another spacecraft: named, never fitted
+    # (a stuck or dead axis is named by the checks below, not as an orbit mismatch)
+    stuck = undetermined_reason(data.b_raw_nt) is not None
+    check_table(data.b_raw_nt, b_ref_mag_nt=data.b_ref_mag_nt, orbit=not stuck)
     train, hold = later_block_split(tel.t_utc_s, holdout_fraction)
     generator = torch.Generator().manual_seed(int(rng.integers(0, 2**62)))
     cal = fit_method(
@@ -223,6 +229,13 @@ def calibrate(
         metrics=metrics,
     )
     document["model"]["attitude_frame"] = attitude_frame
+    implausible = document_problem(document)
+    if implausible is not None:
+        warnings.warn(
+            f"{method}: the calibration is implausible for a magnetometer in nT: {implausible}; "
+            "it will not be promoted or pushed",
+            stacklevel=2,
+        )
     return CalibrationRun(
         calibration=cal,
         document=document,

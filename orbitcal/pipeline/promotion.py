@@ -39,6 +39,7 @@ class Promotion:
         ``"first calibration"`` / ``"champion cannot be scored"`` (promoted: nothing comparable
         in service, and the challenger beats the uncalibrated readings), ``"identity"`` (refused:
         it does not beat them), ``"undetermined"`` (refused: the data cannot determine it),
+        ``"implausible"`` (refused: no magnetometer in nT has it, :mod:`orbitcal.plausibility`),
         ``"margin"`` (the gain is below the margin), ``"significance"`` (above the margin, not
         significant) or ``"margin and significance"`` (both passed: promoted).
     reason : str
@@ -304,17 +305,25 @@ def refuse_undetermined(
     why: str,
     rule: PromotionRule | None = None,
     identity_sq_nt2: FloatArray | None = None,
+    implausible: bool = False,
 ) -> Promotion:
-    """The refusal of a challenger the data cannot determine (:mod:`.determination`), with the
-    uncalibrated readings' RMS on the same rows when given (for the record)."""
+    """The refusal of a challenger the data cannot determine (:mod:`.determination`), or
+    (``implausible``) one no magnetometer in nT can have (:mod:`orbitcal.plausibility`: gain,
+    reflection, held-out error, elements of another spacecraft), with the uncalibrated
+    readings' RMS on the same rows when given (for the record)."""
     rule = rule or PromotionRule()
     identity = None if identity_sq_nt2 is None else float(np.sqrt(np.mean(identity_sq_nt2)))
     ch_rms = float(np.sqrt(np.mean(challenger_sq_nt2)))
     versus = "" if identity is None else f" against the uncalibrated readings' {identity:.3f} nT"
     return Promotion(
         promote=False,
-        rule="undetermined",
-        reason=f"the data cannot determine a calibration: {why}; held-out {metric} "
+        rule="implausible" if implausible else "undetermined",
+        reason=(
+            "the calibration is implausible for a magnetometer in nT: "
+            if implausible
+            else "the data cannot determine a calibration: "
+        )
+        + f"{why}; held-out {metric} "
         f"{ch_rms:.3f} nT{versus}; it is not put in service",
         metric=metric,
         challenger_rms_nt=ch_rms,

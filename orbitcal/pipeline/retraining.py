@@ -26,6 +26,7 @@ from orbitcal.pipeline.promotion import (
 )
 from orbitcal.pipeline.rows import gross_outlier_free
 from orbitcal.pipeline.scores import residuals
+from orbitcal.plausibility import check_table, document_problem, orbit_mismatch_problem
 from orbitcal.telemetry import Telemetry
 
 __all__ = ["Champion", "FitFunction", "RetrainOptions", "Retraining", "retrain"]
@@ -203,6 +204,8 @@ def _outlier_free(
         tel, orbit=orbit, field=options.field, attitude_frame=options.attitude_frame
     )
     assert truth_all.b_ref_mag_nt is not None
+    # a table in Tesla/Gauss/µT is refused whole (every row would be an "outlier")
+    check_table(truth_all.b_raw_nt, b_ref_mag_nt=truth_all.b_ref_mag_nt, orbit=False)
     keep = gross_outlier_free(truth_all.b_raw_nt, truth_all.b_ref_mag_nt)
     excluded = {} if keep.all() else {"outlier": int(np.count_nonzero(~keep))}
     if excluded:
@@ -245,7 +248,7 @@ def _promotion(
         return refuse_undetermined(
             challenger_sq, metric=metric, why=why, rule=options.rule, identity_sq_nt2=identity_sq
         )
-    return decide_promotion(
+    decision = decide_promotion(
         challenger_sq,
         champion_sq,
         metric=metric,
@@ -254,4 +257,21 @@ def _promotion(
         rule=options.rule,
         champion_problem=problem,
         identity_sq_nt2=identity_sq,
+    )
+    if not decision.promote:
+        return decision
+    # a challenger that would be promoted but that no magnetometer in nT can be: refused, saying
+    # why (gain, reflection, held-out error, the elements of another spacecraft)
+    implausible = document_problem(document, holdout_rms_nt=decision.challenger_rms_nt)
+    if implausible is None and truth.b_ref_mag_nt is not None:
+        implausible = orbit_mismatch_problem(truth.b_raw_nt, truth.b_ref_mag_nt)
+    if implausible is None:
+        return decision
+    return refuse_undetermined(
+        challenger_sq,
+        metric=metric,
+        why=implausible,
+        rule=options.rule,
+        identity_sq_nt2=identity_sq,
+        implausible=True,
     )

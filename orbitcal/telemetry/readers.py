@@ -25,7 +25,7 @@ from orbitcal.telemetry.table import (
     TelemetryFormat,
     format_from_path,
 )
-from orbitcal.telemetry.validation import _validate
+from orbitcal.telemetry.validation import _validate, structured_kind
 from orbitcal.timescales import (
     TIME_SCALES,
 )
@@ -202,16 +202,35 @@ def _check_frame(df: pd.DataFrame, limits: ParseLimits) -> None:
                     continue
             except (pa.ArrowException, TypeError, ValueError):
                 pass
-        lengths = col.map(lambda v: len(v) if isinstance(v, str | bytes) else 0)
+        lengths = col.map(_cell_size)
         too_long = np.flatnonzero(lengths.to_numpy(dtype=np.int64) > limits.max_string_chars)
         if too_long.size:
             row = int(too_long[0])
+            value = col.iloc[row]
+            what = (
+                "characters"
+                if isinstance(value, str | bytes)
+                else f"bytes as a JSON {structured_kind(value)}"
+            )
             raise LimitExceededError(
-                f"row {row}: {str(c).strip()} holds {int(lengths.iloc[row]):,} characters, over "
+                f"row {row}: {str(c).strip()} holds {int(lengths.iloc[row]):,} {what}, over "
                 f"the limit max_string_chars = {limits.max_string_chars}",
                 limit_name="max_string_chars",
                 limit=limits.max_string_chars,
             )
+
+
+def _cell_size(value: Any) -> int:
+    """A cell's size against ``max_string_chars``: characters of text, serialised bytes of a
+    structured value (an array or object is held to the same limit as text), 0 for a scalar."""
+    if isinstance(value, str | bytes):
+        return len(value)
+    if structured_kind(value) is None:
+        return 0
+    try:
+        return len(orjson.dumps(value, option=orjson.OPT_PASSTHROUGH_SUBCLASS))
+    except (TypeError, orjson.JSONEncodeError):
+        return len(repr(value))
 
 
 def _check_utf8(data: bytes, *, what: str, header_lines: int = 1) -> None:

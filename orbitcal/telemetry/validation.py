@@ -123,6 +123,52 @@ def _parse_times(series: pd.Series) -> tuple[FloatArray, dict[int, str]]:
     return np.asarray(t_s, dtype=np.float64), dict(errors)
 
 
+def structured_kind(value: Any) -> str | None:
+    """``"array"`` or ``"object"`` for a structured (non-scalar) cell, None for a scalar."""
+    if isinstance(value, dict):
+        return "object"
+    if isinstance(value, list | tuple | set | np.ndarray):
+        return "array"
+    return None
+
+
+def _refuse_structured(df: pd.DataFrame, pre_errors: dict[int, str]) -> dict[int, str]:
+    """Rows holding an array or object in any column, refused with that reason alone.
+
+    Every column of the table is scalar (a number, a time or a text flag): a JSON array or object
+    in a cell is neither stored as its Python text nor read as a number. The cell is emptied so
+    that no later step formats it; the row's reason replaces any other (as a parser's would). A
+    housekeeping channel that held nothing but such cells is dropped rather than read as missing.
+    """
+    out = dict(pre_errors)
+    for c in df.columns:
+        col = df[c]
+        if col.dtype.kind != "O" or pd.api.types.infer_dtype(col, skipna=True) in (
+            "string",
+            "empty",
+            "floating",
+            "integer",
+            "mixed-integer-float",
+            "boolean",
+        ):
+            continue
+        kinds = col.map(structured_kind)
+        rows = np.flatnonzero(kinds.notna().to_numpy(dtype=bool))
+        for i in rows.tolist():
+            value = col.iloc[i]
+            what = f"JSON {kinds.iloc[i]} of {len(value):,} item{'s' * (len(value) != 1)}"
+            out.setdefault(
+                i, f"{str(c).strip()} holds a {what}, not one value: each cell is a number or text"
+            )
+        if rows.size:
+            kept = col.where(kinds.isna(), None)
+            if str(c).strip().startswith(HK_PREFIX) and not kept.notna().any():
+                del df[c]  # a channel that held nothing else: no channel, not a missing value
+            else:
+                df[c] = kept
+    return out
+
+
 def _add(reasons: dict[int, list[str]], rows: npt.NDArray[np.intp], text: str) -> None:
     for i in rows.tolist():
         reasons.setdefault(int(i), []).append(text)
@@ -324,6 +370,7 @@ def _validate(df: pd.DataFrame, *, time_scale: str, pre_errors: dict[int, str]) 
 
     ``pre_errors``: rows the parser could not read at all (their reason replaces any other).
     """
+    pre_errors = _refuse_structured(df, pre_errors)
     columns, missing = _check_columns(df, pre_errors)
     rows = _Rows(df, {i: [r] for i, r in pre_errors.items()})
     if rows.n == 0 or missing:

@@ -17,6 +17,7 @@ from service.deps import EngineDep, SettingsDep, get_spacecraft
 from service.ingest import (
     CCSDS_MEDIA_TYPE,
     MEDIA_TYPES,
+    check_upload_plausible,
     decompress,
     parse_body,
     telemetry_row_batches,
@@ -118,13 +119,14 @@ async def ingest_telemetry(
     def work() -> tuple[int, bytes, int, int, int]:
         """(status, JSON body, accepted, duplicates, rejected) of the upload."""
         with read_tx(engine) as conn:
-            get_spacecraft(conn, spacecraft_id)  # 404 before any parsing
+            known = get_spacecraft(conn, spacecraft_id)  # 404 before any parsing
         # The library's typed errors propagate to the one handler in service.app: a damaged
         # compressed stream or an unreadable table is 400, a parsing limit 413 naming it.
         raw = decompress(
             body, request.headers.get("content-encoding", ""), limit=settings.max_body_bytes
         )
         parsed = parse_body(raw, fmt=fmt, time_scale=time_scale, apid=apid)
+        implausible = check_upload_plausible(parsed.telemetry, known)  # 422: Tesla, Gauss, µT
         n_rejected = len(parsed.rejected)
         bad = cast(list[tuple[int, str]], parsed.rejected)  # RowError is a (row, reason) tuple
         if len(parsed.telemetry) == 0:
@@ -146,6 +148,8 @@ async def ingest_telemetry(
         if accepted:
             _check_health(request, sc.pk, parsed.telemetry if not duplicates else None)
         head = {"accepted": accepted, "duplicates": duplicates}
+        if implausible is not None:
+            head["warnings"] = [implausible]
         return 200, _result_json(head, parsed.rejected), accepted, duplicates, n_rejected
 
     status, payload, accepted, duplicates, n_rejected = await run_in_threadpool(work)

@@ -857,7 +857,7 @@ def test_sigterm_stops_the_server_within_the_deadline_while_a_client_trickles(
 # --- resources --------------------------------------------------------------------------------
 
 
-def test_a_full_disk_is_503_saying_so_and_the_log_says_so(tmp_path: Path) -> None:
+def test_a_full_disk_is_507_saying_so_and_the_log_says_so(tmp_path: Path) -> None:
     env = {"ORBITCAL_SQLITE_MAX_BYTES": str(2 * MIB), "ORBITCAL_LOG_LEVEL": "WARNING"}
     with serve_process(tmp_path, env=env) as s:
         sc = s.new_spacecraft()
@@ -884,7 +884,7 @@ def test_a_full_disk_is_503_saying_so_and_the_log_says_so(tmp_path: Path) -> Non
             full.elapsed.total_seconds(),
             stored=0,
         )
-        assert full.status_code == 503, statuses
+        assert full.status_code == 507, statuses  # Insufficient Storage (issue 44 item 11)
         assert "disk is full" in full.json()["detail"] and full.headers["retry-after"]
         assert "nothing was stored" in full.json()["detail"]
         log = s.log_text()
