@@ -9,7 +9,7 @@ Swarm's GPS positions) is diagnosed by the command line with its defaults and no
 A draw passes (issue 25, deliverable 2) when the verdict is external_field and nothing but
 external_field and field_aligned_currents is significant.
 
-    python benchmarks/independent/real_pass.py --draws 20 --out benchmarks/results/real_pass.json
+    python benchmarks/independent/real_pass.py --draws 20 --out /tmp/real_pass.json
 """
 
 from __future__ import annotations
