@@ -54,18 +54,32 @@ def test_spans_and_cadences_are_drawn_within_2_to_24_h_and_1_to_30_s() -> None:
 
 def test_the_torquer_field_lags_its_command_by_the_drawn_lag() -> None:
     t = np.arange(0.0, 300.0, 0.05)
-    cmd = np.zeros((t.size, 3))
-    cmd[t >= 100.0] = [4.0, -2.0, 1.0]  # a step of the dipole command at t = 100 s
-    field_nt, truth = shapes.lagged_torquer(np.random.default_rng(3), t, cmd)
+    control_t = np.array([-10.0, 100.0])
+    control_u = np.array([[0.0, 0.0, 0.0], [4.0, -2.0, 1.0]])  # a step of the command at 100 s
+    field_nt, truth = shapes.lagged_torquer(np.random.default_rng(3), t, control_t, control_u)
     lag_s = truth["lag_s"]
     assert 1.0 <= lag_s <= 15.0
     final = field_nt[-1]
-    at = np.interp(100.0 + lag_s, t, np.arange(t.size)).round().astype(int)
+    at = int(np.searchsorted(t, 100.0 + lag_s))
     # a first-order lag reaches 1 - 1/e of the step after one time constant, on every axis
     np.testing.assert_allclose(field_nt[at] / final, 1.0 - np.exp(-1.0), atol=0.01)
     assert np.all(np.abs(field_nt[t < 100.0]) < 1e-12)  # nothing before the command
     # a field in step with the command (no lag) would be at its final value at once
     assert np.all(np.abs(field_nt[np.searchsorted(t, 100.2)] / final) < 0.2)
+    # the same at a 10 s cadence: the lag is evaluated at the samples, not on their grid
+    coarse = np.arange(0.0, 300.0, 10.0)
+    field_10s, _ = shapes.lagged_torquer(np.random.default_rng(3), coarse, control_t, control_u)
+    np.testing.assert_allclose(field_10s, field_nt[np.searchsorted(t, coarse)], atol=1e-9)
+
+
+def test_the_table_gives_the_command_active_at_each_sample() -> None:
+    t = np.arange(0.0, 600.0, 7.0)
+    b = np.column_stack([np.sin(t / 50.0), np.cos(t / 70.0), np.sin(t / 90.0)]) * 1e4
+    cmd, control_t, control_u, truth = shapes.torquer_commands(np.random.default_rng(1), t, b)
+    assert 4.0 <= truth["control_period_s"] <= 30.0
+    for k in (0, 10, 50, len(t) - 1):
+        j = np.searchsorted(control_t, t[k], side="right") - 1
+        np.testing.assert_array_equal(cmd[k], control_u[j])
 
 
 def test_first_order_lag_is_exact_for_a_held_command() -> None:

@@ -6,6 +6,7 @@ chaosmagpy only, and reach the diagnosis through its command line, as a user's t
 
 from __future__ import annotations
 
+import gzip
 import json
 import os
 import subprocess
@@ -190,3 +191,16 @@ def git_head() -> str:
         ["git", "status", "--porcelain", "orbitcal"], capture_output=True, text=True, cwd=REPO
     )
     return out.stdout.strip() + ("+dirty" if dirty.stdout.strip() else "")
+
+
+def write_json(path: Path, doc: dict) -> None:
+    text = json.dumps(doc, indent=1, default=float)
+    if path.suffix == ".gz":
+        path.write_bytes(gzip.compress(text.encode(), mtime=0))
+    else:
+        path.write_text(text)
+
+
+def read_json(path: Path) -> dict:
+    data = path.read_bytes()
+    return json.loads(gzip.decompress(data) if path.suffix == ".gz" else data)  # type: ignore[no-any-return]

@@ -29,14 +29,13 @@ Cost (2-core machine, one job): making a world takes 1-3 s for a few thousand sa
 from __future__ import annotations
 
 import argparse
-import gzip
 import json
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
-from common import check_engines, git_head, run_cli
+from common import check_engines, git_head, run_cli, write_json
 from noise import COLOURED, NOISE_KINDS
 from world import draw_effects, make_world
 
@@ -189,19 +188,6 @@ def plan(seed: int, n_effect_worlds: int, null_per_kind: int) -> list[tuple[list
         for k in range(null_per_kind):
             out.append(([], kind, (j + k) % 2 == 1))  # every other world: small unmodelled fields
     return out
-
-
-def write_json(path: Path, doc: dict) -> None:
-    text = json.dumps(doc, indent=1, default=float)
-    if path.suffix == ".gz":
-        path.write_bytes(gzip.compress(text.encode(), mtime=0))
-    else:
-        path.write_text(text)
-
-
-def read_json(path: Path) -> dict:
-    data = path.read_bytes()
-    return json.loads(gzip.decompress(data) if path.suffix == ".gz" else data)  # type: ignore[no-any-return]
 
 
 def main() -> None:

@@ -8,9 +8,9 @@ was drawn with (a dict of plain floats); none of them is the catalogue's templat
   eclipse; the offsets **and the scale factors** move with it (the scale through the sensor's
   matrix, so the field it adds is proportional to the field measured), with a quadratic term;
   the thermistor the table gives sits elsewhere (its own, longer lag).
-* :func:`lagged_torquer`: pulse-width commands held over each control period; the field at the
-  sensor **lags its command** through a first-order filter (coil inductance and eddy currents,
-  time constant ``lag_s``), coupled by a random 3x3 matrix.
+* :func:`lagged_torquer`: dipole commands held over each control period (its own clock, not the
+  samples'); the field at the sensor **lags its command** through a first-order filter (coil
+  inductance and eddy currents, time constant ``lag_s``), coupled by a random 3x3 matrix.
 * :func:`partial_ring_current`: a storm-time field along the dipole axis whose size **depends on
   magnetic local time** (a partial ring current, deepest near dusk: SYM + ASY cos(MLT - dusk)),
   SYM from a driven Burton equation with a noisy injection, ASY decaying faster.
@@ -88,30 +88,41 @@ def thermal_sensor(
 
 def torquer_commands(
     rng: np.random.Generator, t_s: np.ndarray, b_body_nt: np.ndarray
-) -> tuple[np.ndarray, dict]:
-    """B-dot-like dipole commands [A m^2] held over each control period, some periods off."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+    """B-dot-like dipole commands [A m^2], set at the start of each control period of a drawn
+    length and held over it, some periods off. Returns the command active at each sample (the
+    table's ``mtq_*``), the control times and levels (K,), (K, 3), and the truth."""
     period_s = float(rng.uniform(4.0, 30.0))
     m_max = float(rng.uniform(5.0, 20.0))
-    slot = np.floor((t_s - t_s[0]) / period_s).astype(int)
+    control_t = (
+        t_s[0]
+        - rng.uniform(0.0, period_s)
+        + np.arange(0.0, t_s[-1] - t_s[0] + 2 * period_s, period_s)
+    )
     db = np.gradient(b_body_nt, t_s, axis=0)
-    first = np.r_[0, np.flatnonzero(np.diff(slot)) + 1]  # first sample of each period
-    level = -np.sign(db[first]) * rng.choice([0.25, 0.5, 0.75, 1.0], size=(len(first), 3))
-    level *= (rng.random(len(first)) > 0.3)[:, None]  # some periods without torquing
-    cmd = m_max * level[np.searchsorted(first, np.arange(len(t_s)), side="right") - 1]
-    return cmd, {"control_period_s": period_s, "dipole_max_am2": m_max}
+    db_at = np.column_stack([np.interp(control_t, t_s, db[:, k]) for k in range(3)])
+    level = -np.sign(db_at) * rng.choice([0.25, 0.5, 0.75, 1.0], size=(len(control_t), 3))
+    level *= (rng.random(len(control_t)) > 0.3)[:, None]  # some periods without torquing
+    control_u = m_max * level
+    active = np.searchsorted(control_t, t_s, side="right") - 1
+    truth = {"control_period_s": period_s, "dipole_max_am2": m_max}
+    return control_u[active], control_t, control_u, truth
 
 
 def lagged_torquer(
-    rng: np.random.Generator, t_s: np.ndarray, cmd: np.ndarray
+    rng: np.random.Generator, t_s: np.ndarray, control_t: np.ndarray, control_u: np.ndarray
 ) -> tuple[np.ndarray, dict]:
-    """Field at the sensor [nT] (N, 3): the command through a first-order lag, coupled."""
+    """Field at the sensor [nT] (N, 3): the commands (``control_u`` from each ``control_t`` to
+    the next) through a first-order lag of time constant ``lag_s``, coupled by a 3x3 matrix;
+    evaluated at the sample times exactly, whatever the cadence."""
     lag_s = float(rng.uniform(1.0, 15.0))
     coupling = rng.normal(scale=rng.uniform(3.0, 10.0), size=(3, 3))
-    dipole = first_order_lag(cmd, t_s, lag_s, np.zeros(3))
-    return dipole @ coupling.T, {
-        "lag_s": lag_s,
-        "coupling_nt_per_am2_max": float(np.abs(coupling).max()),
-    }
+    at_control = first_order_lag(control_u, control_t, lag_s, np.zeros(3))  # y at each c_j
+    j = np.clip(np.searchsorted(control_t, t_s, side="right") - 1, 0, None)
+    decay = np.exp(-(t_s - control_t[j]) / lag_s)[:, None]
+    dipole = control_u[j] + (at_control[j] - control_u[j]) * decay
+    truth = {"lag_s": lag_s, "coupling_nt_per_am2_max": float(np.abs(coupling).max())}
+    return dipole @ coupling.T, truth
 
 
 def magnetic_local_time_h(

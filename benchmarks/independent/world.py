@@ -481,8 +481,8 @@ def _instrumental(
         if on("temperature"):
             added += field_nt
     if has_mtq:
-        cmd, cmd_truth = shapes.torquer_commands(rng, t, b_sensor)
-        field_nt, lag_truth = shapes.lagged_torquer(rng, t, cmd)
+        cmd, control_t, control_u, cmd_truth = shapes.torquer_commands(rng, t, b_sensor)
+        field_nt, lag_truth = shapes.lagged_torquer(rng, t, control_t, control_u)
         if "magnetorquer" in effects:
             eff["magnetorquer"] = {**cmd_truth, **lag_truth}
         if on("magnetorquer"):
