@@ -319,8 +319,49 @@ def _engines_storm(runs: list[dict]) -> list[str]:
     return out
 
 
+#: The figures of our simulator's panels (``benchmarks/diagnose_engines.py``), per panel.
+SIM_FIGURES = {
+    "blind": (
+        ("top1", "top-1 verdict, all worlds (one effect or none)"),
+        ("top1_strict", "top-1, strict"),
+        ("min_top1_per_effect", "lowest top-1 of an effect"),
+        ("false_alarm_rate", "null worlds with a false alarm"),
+        ("shrink_vs_oracle_mean", "held-out shrink against the oracle's, mean"),
+    ),
+    "compound": (
+        ("recall", "recall of the observable injected effects"),
+        ("recall_all_injected", "recall of all injected effects"),
+        ("worlds_with_spurious", "worlds with a spurious effect"),
+        ("verdict_among_injected", "verdict among the injected"),
+    ),
+}
+
+
+def _engines_sim(runs: list[dict]) -> list[str]:
+    """Our simulator's panels, one column per engine, one table per run."""
+    out: list[str] = []
+    for run in runs:
+        engines = [e for e in ("rules", "model") if e in run["engines"]]
+        title = "240 blind worlds" if run["panel"] == "blind" else "compound worlds"
+        out += [f"## Our simulator: {title} (`{run['command']}`)", ""]
+        out += ["| | " + " | ".join(engines) + " |", "|---|" + "---:|" * len(engines)]
+        for key, label in SIM_FIGURES[run["panel"]]:
+            cells = []
+            for e in engines:
+                v = run["engines"][e]["summary"].get(key)
+                cells.append(
+                    f"{100 * v:.1f} %"
+                    if isinstance(v, float) and key != "shrink_vs_oracle_mean"
+                    else f"{v}"
+                )
+            out.append(f"| {label} | " + " | ".join(cells) + " |")
+        out.append("")
+    return out
+
+
 def engines_page(runs: list[dict], label: str) -> str:
     """``benchmarks/results/diagnose_independent_engines.md``: every panel of ``runs``."""
+    sim = [r for r in runs if "panel" in r]
     worlds = [r for r in runs if r["rows"] and "injected" in r["rows"][0]]
     storm = [r for r in runs if r["rows"] and "attitude" in r["rows"][0]]
     lines = [
@@ -336,6 +377,8 @@ def engines_page(runs: list[dict], label: str) -> str:
         lines += [*_engines_worlds(worlds), "", *_engines_cost(worlds), ""]
     if storm:
         lines += [*_engines_storm(storm), ""]
+    if sim:
+        lines += _engines_sim(sim)
     return "\n".join(lines)
 
 
