@@ -1,7 +1,7 @@
 """Compound-world diagnosis benchmark over several plan seeds -> benchmarks/results/*.json.
 
     python benchmarks/diagnose_compound.py --run 1:40 2:30 3:30 11:50 12:50 \
-        --tuning 1 2 3 --out benchmarks/results/diagnose_compound.json
+        --tuning 1 2 3 --out /tmp/diagnose_compound.json
 
 runs :func:`orbitcal.diagnose.bench.run_compound_benchmark` once per ``SEED:WORLDS`` (what
 ``orbitcal bench diagnose --compound --cases WORLDS --seed SEED`` runs) and writes one JSON with a

@@ -6,13 +6,14 @@ tables of the first run and one summary line per further run (other seeds).
 ``python benchmarks/diagnose_tables.py --update benchmarks/results/diagnose.md DIR [DIR ...]``
 writes them into that file between its ``<!-- diagnose_tables: begin -->`` and
 ``<!-- diagnose_tables: end -->`` markers and keeps each run's ``diagnose_results.json`` beside it
-as ``diagnose_results_seed<S>.json`` (and the first run's ``diagnose_confusion.{json,png}``): the
-figures of the page are the script's output on committed results, and
-``tests/test_diagnose_tables.py`` checks that they still are.
+as ``diagnose_results_seed<S>.json.gz`` (compressed; and the first run's
+``diagnose_confusion.{json,png}``): the figures of the page are the script's output on committed
+results, and ``tests/test_diagnose_tables.py`` checks that they still are.
 """
 
 from __future__ import annotations
 
+import gzip
 import json
 import sys
 from pathlib import Path
@@ -21,6 +22,11 @@ from typing import Any
 
 def _pct(x: float) -> str:
     return f"{100.0 * x:.1f}%"
+
+
+def load_kept(path: Path) -> dict[str, Any]:
+    """A run kept beside the page (``diagnose_results_seed*.json.gz``)."""
+    return json.loads(gzip.decompress(path.read_bytes()))  # type: ignore[no-any-return]
 
 
 def _load(directory: str) -> dict[str, Any]:
@@ -135,8 +141,9 @@ def update(page: Path, directories: list[str]) -> None:
     page.write_text(text[: start + len(BEGIN)] + "\n" + tables(runs) + "\n" + text[end:])
     for run in runs:
         seed = run["settings"]["seed"]
-        target = page.parent / f"diagnose_results_seed{seed}.json"
-        target.write_text(json.dumps(run, indent=0) + "\n")
+        # compressed: the raw run stays beside the page only because the page's test reads it
+        target = page.parent / f"diagnose_results_seed{seed}.json.gz"
+        target.write_bytes(gzip.compress((json.dumps(run, indent=0) + "\n").encode(), mtime=0))
     first = Path(directories[0])
     for name in ("diagnose_confusion.json", "diagnose_confusion.png"):
         if (first / name).exists():

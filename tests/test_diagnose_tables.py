@@ -87,7 +87,7 @@ def test_update_writes_the_tables_between_the_markers_and_keeps_the_results(
     for doc in (text, page):
         assert doc.index(tables.BEGIN) == page.index(tables.BEGIN)
     assert text[text.index(tables.END) :] == page[page.index(tables.END) :]
-    kept = json.loads((tmp_path / "diagnose_results_seed0.json").read_text())
+    kept = tables.load_kept(tmp_path / "diagnose_results_seed0.json.gz")
     assert tables.tables([kept, _run(1, 0.97)]).strip() == block.strip()
 
 
@@ -95,14 +95,14 @@ def test_the_page_holds_the_scripts_output_on_the_kept_results() -> None:
     tables = _script()
     page = PAGE.read_text()
     shown = page[page.index(tables.BEGIN) + len(tables.BEGIN) : page.index(tables.END)]
-    kept = sorted(PAGE.parent.glob("diagnose_results_seed*.json"))
-    runs = sorted((json.loads(p.read_text()) for p in kept), key=lambda r: r["settings"]["seed"])
+    kept = sorted(PAGE.parent.glob("diagnose_results_seed*.json.gz"))
+    runs = sorted((tables.load_kept(p) for p in kept), key=lambda r: r["settings"]["seed"])
     assert runs, "no kept benchmark results beside benchmarks/results/diagnose.md"
     assert shown.strip() == tables.tables(runs).strip()
 
 
 def test_the_readme_quotes_the_kept_seed_0_run() -> None:
-    s = json.loads((PAGE.parent / "diagnose_results_seed0.json").read_text())["summary"]
+    s = _script().load_kept(PAGE.parent / "diagnose_results_seed0.json.gz")["summary"]
     row = next(
         line for line in (ROOT / "README.md").read_text().splitlines()
         if line.startswith("| blind diagnosis")

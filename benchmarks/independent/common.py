@@ -6,6 +6,7 @@ chaosmagpy only, and reach the diagnosis through its command line, as a user's t
 
 from __future__ import annotations
 
+import gzip
 import json
 import os
 import subprocess
@@ -125,12 +126,47 @@ def write_table(
     np.savetxt(path, data, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
 
 
-def run_cli(table: Path, out: Path, *, tle: Path | None = None, frame: str = "GCRS") -> dict:
-    """``orbitcal diagnose TABLE [--tle TLE] --attitude-frame FRAME --out OUT`` with defaults."""
+ENGINE_CLI = Path(__file__).resolve().parent / "engine_cli.py"
+
+
+def check_engines(engines: list[str]) -> str:
+    """Fail with a clear message unless every one of ``engines`` can run; returns how the
+    engine is chosen (``"option"``, or ``"default"`` when ``DiagnosisOptions`` has no ``engine``
+    field and only the rules engine was asked for). Asked in a child process: nothing here
+    imports ``orbitcal``."""
+    code = (
+        "import sys; sys.path.insert(0, sys.argv[1]); from engine_cli import engine_support, "
+        "missing_engine_message as m; ok = engine_support(); "
+        "bad = [e for e in sys.argv[2:] if not ok and e != 'rules']; "
+        "print('option' if ok else 'default'); sys.exit(m(bad[0]) if bad else 0)"
+    )
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    proc = subprocess.run(
+        [sys.executable, "-c", code, str(ENGINE_CLI.parent), *engines],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=REPO,
+    )
+    if proc.returncode != 0:
+        raise SystemExit((proc.stderr or proc.stdout).strip().splitlines()[-1])
+    return proc.stdout.strip()
+
+
+def run_cli(
+    table: Path,
+    out: Path,
+    *,
+    tle: Path | None = None,
+    frame: str = "GCRS",
+    engine: str | None = None,
+) -> dict:
+    """``orbitcal diagnose TABLE [--tle TLE] --attitude-frame FRAME --out OUT`` with defaults;
+    with ``engine``, through ``engine_cli.py`` (``DiagnosisOptions(engine=ENGINE)``)."""
+    entry = ["-m", "orbitcal"] if engine is None else [str(ENGINE_CLI), engine]
     cmd = [
         sys.executable,
-        "-m",
-        "orbitcal",
+        *entry,
         "diagnose",
         str(table),
         "--out",
@@ -155,3 +191,16 @@ def git_head() -> str:
         ["git", "status", "--porcelain", "orbitcal"], capture_output=True, text=True, cwd=REPO
     )
     return out.stdout.strip() + ("+dirty" if dirty.stdout.strip() else "")
+
+
+def write_json(path: Path, doc: dict) -> None:
+    text = json.dumps(doc, indent=1, default=float)
+    if path.suffix == ".gz":
+        path.write_bytes(gzip.compress(text.encode(), mtime=0))
+    else:
+        path.write_text(text)
+
+
+def read_json(path: Path) -> dict:
+    data = path.read_bytes()
+    return json.loads(gzip.decompress(data) if path.suffix == ".gz" else data)  # type: ignore[no-any-return]

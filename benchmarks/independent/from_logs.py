@@ -4,6 +4,7 @@ the draws and worlds that finished.
 
     python benchmarks/independent/from_logs.py real LOG --commit C > SUMMARY.json
     python benchmarks/independent/from_logs.py worlds LOG --commit C > SUMMARY.json
+    python benchmarks/independent/from_logs.py worlds LOG --commit C --engine rules  # one engine
 """
 
 from __future__ import annotations
@@ -87,8 +88,9 @@ def main() -> None:
     ap.add_argument("kind", choices=["real", "worlds"])
     ap.add_argument("log", type=Path)
     ap.add_argument("--commit", required=True)
+    ap.add_argument("--engine", default=None, help="the lines of this engine only")
     args = ap.parse_args()
-    rows = _rows(args.log)
+    rows = [r for r in _rows(args.log) if args.engine in (None, r.get("engine"))]
     out = (
         real_summary(rows, args.commit)
         if args.kind == "real"

@@ -1,19 +1,29 @@
-"""Run independent worlds (``world.py``) through ``orbitcal diagnose`` and score the reports.
+"""Run independent worlds (``world.py``) through ``orbitcal diagnose``, each engine on the same
+worlds, and score the reports.
 
-Compound worlds carry two effects drawn from the generator's list; null worlds carry none, with
-the noise of one kind (white, 1/f, random walk, quantised, spikes, gaps) and, in every other
-world (alternating over the kinds), small unmodelled fields (crust above degree 100, weak auroral
-sheets of 3-8 nT).
+Effect worlds carry one to three of the eleven effects (``world.draw_effects``) under noise of a
+drawn kind (white, 1/f, random walk, AR(1), or a different kind and level per axis); null worlds
+carry none, with the noise of each kind of ``noise.NOISE_KINDS`` in turn and, in every other
+world, small unmodelled fields (crust above degree 100, weak auroral sheets of 3-8 nT). Spans of
+2-24 h and cadences of 1-30 s are drawn per world.
 
-Scores: recall (injected effects called significant; a second figure also credits an injected
-effect that a significant one names as indistinguishable from it; a third counts only the
-effects ``oracle.py`` finds observable, as the project's own benchmark does), worlds with a
-spurious significant effect,
-verdict among the injected, coverage of the 90 % interval of ``dt_s`` (time_offset) and the
-false-alarm rate of null worlds by noise kind. Default options, no prior, the TLE the user has.
+``--engine rules|model|both``: each world is made and written once and diagnosed by each engine
+(``engine_cli.py``: ``DiagnosisOptions(engine=...)``). Until ``DiagnosisOptions`` has its
+``engine`` field only ``rules`` runs (the default engine), and ``model`` / ``both`` stop at once
+with a message saying so.
 
-    python benchmarks/independent/run_worlds.py --compound 20 --null-per-kind 3 --seed 1000 \
-        --out FILE
+Scores per engine (:func:`summarise`): recall (injected effects called significant; also per
+effect, and crediting an effect named as indistinguishable from a significant one), worlds with
+a spurious significant effect, verdict among the injected, coverage of the 90 % interval of
+``dt_s``, null false alarms by noise kind, and, where the report gives a ``probability`` per
+effect, the (probability, present?) pairs of a reliability diagram with their binned frequencies
+and expected calibration error. Default options, no prior, the TLE the user has.
+
+    python benchmarks/independent/run_worlds.py --engine both --seed S --out RUN.json.gz
+
+Cost (2-core machine, one job): making a world takes 1-3 s for a few thousand samples and about
+20 s for a day at 1 Hz with every effect; the diagnosis of each engine comes on top (the
+``wall_s`` of each row says how long).
 """
 
 from __future__ import annotations
@@ -25,33 +35,44 @@ import time
 from pathlib import Path
 
 import numpy as np
-from common import git_head, run_cli
-from oracle import observability
-from world import EFFECTS, NOISE_KINDS, make_world
+from common import check_engines, git_head, run_cli, write_json
+from noise import COLOURED, NOISE_KINDS
+from world import draw_effects, make_world
+
+#: Noise kinds of the effect worlds: coloured, or a different kind and level per axis.
+EFFECT_NOISE = (*COLOURED, "per_axis")
+#: Bins of the reliability diagram.
+BINS = np.linspace(0.0, 1.0, 11)
 
 
 def score(report: dict, injected: list[str], truth: dict) -> dict:
+    """One report against the truth of its world."""
     if "error" in report:
         return {"error": report["error"]}
     sig = [e["name"] for e in report["effects"] if e.get("significant")]
     by_name = {e["name"]: e for e in report["effects"]}
-    # Names a significant effect lists as indistinguishable from it on these data (a time-tag
-    # error and an along-track orbit error under nadir pointing): credited only in the second
-    # recall figure, as the project's own benchmark credits them.
+    # Names a significant effect lists as indistinguishable from it on these data: credited
+    # only in the recall counting twins, as the project's own benchmark credits them.
     twins = {
         t for n in sig for t in (by_name[n].get("params") or {}).get("indistinguishable_from") or []
     }
     row: dict = {
         "verdict": report["verdict"],
         "verdict_status": report.get("verdict_status"),
+        "verdict_probability": report.get("verdict_probability"),
         "significant": sig,
         "found": [e for e in injected if e in sig],
         "found_as_twin": [e for e in injected if e not in sig and e in twins],
         "spurious": [e for e in sig if e not in injected],
         "verdict_ok": report["verdict"] in injected if injected else report["verdict"] == "none",
+        "probabilities": {
+            e["name"]: float(e["probability"])
+            for e in report["effects"]
+            if e.get("probability") is not None
+        },
         "baseline_holdout_rms_nt": report["baseline"]["holdout_rms_nt"],
         "final_holdout_rms_nt": (report.get("final") or {}).get("holdout_rms_nt"),
-        "gap": report.get("gap"),
+        "confirmation": report.get("confirmation"),
     }
     cover = {}
     if "dt_s" in truth and "time_offset" in sig:
@@ -61,21 +82,51 @@ def score(report: dict, injected: list[str], truth: dict) -> dict:
                 "truth": truth["dt_s"],
                 "interval": iv,
                 "covered": bool(iv[0] <= truth["dt_s"] <= iv[1]),
-                "bound_limited": bool(
-                    (by_name["time_offset"].get("param_bound_limited") or {}).get("dt_s", False)
-                ),
             }
     row["coverage"] = cover
     return row
 
 
-def summarise(rows: list[dict]) -> dict:
+def _of_engine(rows: list[dict], engine: str | None) -> list[dict]:
+    """Rows with the scores of ``engine`` at the top (rows of runs before engines: as they are)."""
+    out = []
+    for r in rows:
+        if "engines" not in r:
+            out.append(r)
+        elif engine in r["engines"]:
+            out.append({**{k: v for k, v in r.items() if k != "engines"}, **r["engines"][engine]})
+    return out
+
+
+def reliability(pairs: list[tuple[float, bool]]) -> dict:
+    """Binned frequencies of (probability, present?) pairs and the expected calibration error."""
+    if not pairs:
+        return {"pairs": 0}
+    p = np.array([a for a, _ in pairs], dtype=float)
+    y = np.array([b for _, b in pairs], dtype=float)
+    idx = np.clip(np.digitize(p, BINS[1:-1]), 0, len(BINS) - 2)
+    bins, ece = [], 0.0
+    for b in range(len(BINS) - 1):
+        sel = idx == b
+        if sel.any():
+            bins.append(
+                {
+                    "bin": [float(BINS[b]), float(BINS[b + 1])],
+                    "n": int(sel.sum()),
+                    "mean_probability": float(p[sel].mean()),
+                    "frequency_present": float(y[sel].mean()),
+                }
+            )
+            ece += sel.mean() * abs(p[sel].mean() - y[sel].mean())
+    return {"pairs": len(pairs), "ece": float(ece), "bins": bins}
+
+
+def summarise(rows: list[dict], engine: str | None = None) -> dict:
+    rows = _of_engine(rows, engine)
     comp = [r for r in rows if r["injected"] and "error" not in r]
     null = [r for r in rows if not r["injected"] and "error" not in r]
     n_inj = sum(len(r["injected"]) for r in comp)
     covered = [c["covered"] for r in comp for c in r["coverage"].values()]
-    # the project's own benchmark counts only observable effects (oracle.py)
-    scored = all("oracle" in r for r in comp)
     observable = [(e, r) for r in comp for e, o in r.get("oracle", {}).items() if o["observable"]]
     by_kind = {}
     for kind in NOISE_KINDS:
@@ -86,13 +137,24 @@ def summarise(rows: list[dict]) -> dict:
                 "false_alarm_rate": float(np.mean([bool(r["significant"]) for r in rs])),
                 "verdict_none_rate": float(np.mean([r["verdict"] == "none" for r in rs])),
             }
+    by_effect: dict[str, list[int]] = {}
+    for r in comp:
+        for e in r["injected"]:
+            by_effect.setdefault(e, [0, 0])
+            by_effect[e][0] += e in r["found"]
+            by_effect[e][1] += 1
+    pairs = [
+        (p, name in r["injected"]) for r in comp + null for name, p in r["probabilities"].items()
+    ] if all("probabilities" in r for r in comp + null) else []  # fmt: skip
     return {
         "compound_worlds": len(comp),
+        "injected_effects": n_inj,
         "recall": sum(len(r["found"]) for r in comp) / max(n_inj, 1),
-        "observable_effects": len(observable) if scored else None,
+        "recall_by_effect": {e: {"found": f, "injected": n} for e, (f, n) in by_effect.items()},
+        "observable_effects": len(observable) if all("oracle" in r for r in comp) else None,
         "recall_observable": (
             sum(e in r["found"] for e, r in observable) / max(len(observable), 1)
-            if scored
+            if observable
             else None
         ),
         "recall_with_twins": (
@@ -111,79 +173,99 @@ def summarise(rows: list[dict]) -> dict:
         if null
         else None,
         "null_by_noise_kind": by_kind,
+        "reliability": reliability(pairs),
         "errors": sum("error" in r for r in rows),
     }
 
 
+def plan(seed: int, n_effect_worlds: int, null_per_kind: int) -> list[tuple[list[str], str, bool]]:
+    """(effects, noise kind, small unmodelled fields) of each world of ``seed``."""
+    pick = np.random.default_rng(seed)
+    out: list[tuple[list[str], str, bool]] = []
+    for _ in range(n_effect_worlds):
+        out.append((draw_effects(pick), str(pick.choice(EFFECT_NOISE)), False))
+    for j, kind in enumerate(NOISE_KINDS):
+        for k in range(null_per_kind):
+            out.append(([], kind, (j + k) % 2 == 1))  # every other world: small unmodelled fields
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--compound", type=int, default=20)
-    ap.add_argument("--null-per-kind", type=int, default=3)
-    ap.add_argument("--seed", type=int, default=1000)
-    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--compound", type=int, default=20, help="effect worlds (1-3 effects each)")
+    ap.add_argument("--null-per-kind", type=int, default=2)
+    ap.add_argument("--seed", type=int, required=True)
+    ap.add_argument("--engine", choices=("rules", "model", "both"), default="rules")
+    ap.add_argument("--out", type=Path, required=True, help="RUN.json or RUN.json.gz")
+    ap.add_argument("--oracle", action="store_true", help="also score observability (oracle.py)")
     ap.add_argument("--keep", type=Path, default=None, help="keep each table, TLE and report here")
     ap.add_argument("--only", type=int, nargs="+", default=None, help="run these worlds only")
     args = ap.parse_args()
-    plan: list[tuple[list[str], str, bool]] = []
-    pick = np.random.default_rng(args.seed)
-    for _ in range(args.compound):
-        plan.append((sorted(pick.choice(EFFECTS, size=2, replace=False).tolist()), "white", False))
-    for j, kind in enumerate(NOISE_KINDS):
-        for k in range(args.null_per_kind):
-            plan.append(([], kind, (j + k) % 2 == 1))  # every other world: small unmodelled fields
+    engines = ["rules", "model"] if args.engine == "both" else [args.engine]
+    chosen_by = check_engines(engines)
     rows = []
     t0 = time.time()
     with tempfile.TemporaryDirectory() as tmp:
         where = args.keep or Path(tmp)
         where.mkdir(parents=True, exist_ok=True)
-        for i, (effects, noise, small) in enumerate(plan):
+        for i, (effects, noise, small) in enumerate(
+            plan(args.seed, args.compound, args.null_per_kind)
+        ):
             if args.only is not None and i not in args.only:
                 continue
-            rng = np.random.default_rng([args.seed, i])
-            world = make_world(rng, effects, noise=noise, small_unmodelled=small)
-            oracle = observability([args.seed, i], effects, noise, small)
+            t_make = time.time()
+            world = make_world(np.random.default_rng([args.seed, i]), effects, noise=noise,
+                               small_unmodelled=small)  # fmt: skip
             stem = f"world_{i}" if args.keep else "world"
             table, tle = where / f"{stem}.csv", where / f"{stem}.tle"
             world.write(table, tle)
-            rep = run_cli(table, where / f"{stem}.json", tle=tle)
-            row = {
+            row: dict = {
                 "world": i,
                 "injected": effects,
                 "noise": noise,
                 "small_unmodelled": small,
+                "samples": int(world.t_unix_s.size),
                 "truth": world.truth,
-                "oracle": oracle,
-                **score(rep, effects, world.truth),
+                "make_s": round(time.time() - t_make, 2),
+                "engines": {},
             }
+            if args.oracle:
+                from oracle import observability
+
+                row["oracle"] = observability([args.seed, i], effects, noise, small)
+            for engine in engines:
+                t_run = time.time()
+                rep = run_cli(table, where / f"{stem}_{engine}.json", tle=tle, engine=engine)
+                row["engines"][engine] = {
+                    **score(rep, effects, world.truth),
+                    "wall_s": round(time.time() - t_run, 2),
+                }
+                print(
+                    json.dumps(
+                        {"world": i, "engine": engine, "injected": effects, "noise": noise,
+                         "samples": row["samples"], "make_s": row["make_s"]}
+                        | {k: row["engines"][engine].get(k)
+                           for k in ("verdict", "significant", "wall_s", "error")},
+                        default=float,
+                    ),
+                    flush=True,
+                )  # fmt: skip
             rows.append(row)
-            print(
-                json.dumps(
-                    {
-                        k: row.get(k)
-                        for k in (
-                            "world",
-                            "injected",
-                            "noise",
-                            "verdict",
-                            "significant",
-                            "coverage",
-                        )
-                    }
-                ),
-                flush=True,
-            )
     summary = {
         "commit": git_head(),
         "command": (
-            f"python benchmarks/independent/run_worlds.py --compound {args.compound} "
-            f"--null-per-kind {args.null_per_kind} --seed {args.seed}"
+            f"python benchmarks/independent/run_worlds.py --engine {args.engine} "
+            f"--compound {args.compound} --null-per-kind {args.null_per_kind} --seed {args.seed}"
+            + (" --oracle" if args.oracle else "")
+            + (f" --only {' '.join(map(str, args.only))}" if args.only else "")
         ),
+        "engine_chosen_by": chosen_by,
         "wall_s": round(time.time() - t0, 1),
-        **summarise(rows),
+        "engines": {e: summarise(rows, e) for e in engines},
         "rows": rows,
     }
-    args.out.write_text(json.dumps(summary, indent=1, default=float))
-    print(json.dumps({k: v for k, v in summary.items() if k != "rows"}, indent=1))
+    write_json(args.out, summary)
+    print(json.dumps({k: v for k, v in summary.items() if k != "rows"}, indent=1, default=float))
 
 
 if __name__ == "__main__":

@@ -5,6 +5,8 @@
     python benchmarks/independent/tables.py --real-summary RUN.json ...   # the README's row
     python benchmarks/independent/tables.py --real-runs LABEL=RUN.json ...  # a row per run
     python benchmarks/independent/tables.py --pooled LABEL=A.json,B.json ...  # worlds pooled
+    python benchmarks/independent/tables.py --engines RUN.json.gz ... --label "tuning seeds ..." \
+        --write benchmarks/results/diagnose_independent_engines.md  # engines side by side
 """
 
 from __future__ import annotations
@@ -198,6 +200,188 @@ def _pooled(specs: list[str]) -> list[str]:
     return out
 
 
+def _cell(n: int, d: int) -> str:
+    return f"{n} of {d} = {100.0 * n / d:.1f} %" if d else "-"
+
+
+def _engines_worlds(runs: list[dict]) -> list[str]:
+    """The independent-generator panel, one column per engine, the worlds of all ``runs``."""
+    from run_worlds import summarise
+
+    rows = [r for run in runs for r in run["rows"]]
+    engines = [e for e in ("rules", "model") if any(e in run["engines"] for run in runs)]
+    s = {e: summarise(rows, e) for e in engines}
+    head = "| | " + " | ".join(engines) + " |"
+    rule = "|---|" + "---:|" * len(engines)
+    out = ["## Independent worlds (`world.py`: 1-3 effects, new shapes; null worlds by noise kind)"]
+    out += ["", head, rule]
+
+    def line(label: str, cell: object) -> None:
+        out.append(f"| {label} | " + " | ".join(cell(e) for e in engines) + " |")  # type: ignore[operator]
+
+    def share(key: str, of: str) -> object:
+        return lambda e: _cell(round((s[e][key] or 0.0) * s[e][of]), s[e][of])
+
+    line("effect worlds", lambda e: str(s[e]["compound_worlds"]))
+    line("recall (injected effects named significant)", share("recall", "injected_effects"))
+    line("recall counting named twins", share("recall_with_twins", "injected_effects"))
+    line("worlds with a spurious effect", share("worlds_with_spurious", "compound_worlds"))
+    line("verdict among the injected", share("verdict_among_injected", "compound_worlds"))
+    line("null worlds with a false alarm", share("null_false_alarm_rate", "null_worlds"))
+    line(
+        "dt 90 % interval holds the truth",
+        lambda e: _cell(
+            round((s[e]["dt_interval_coverage_90"] or 0) * s[e]["dt_intervals"]),
+            s[e]["dt_intervals"],
+        ),
+    )
+    line("reports in error", lambda e: str(s[e]["errors"]))
+    out += ["", "Recall by effect:", "", "| effect | " + " | ".join(engines) + " |", rule]
+    names = sorted({n for e in engines for n in s[e]["recall_by_effect"]})
+    for name in names:
+        cells = []
+        for e in engines:
+            v = s[e]["recall_by_effect"].get(name)
+            cells.append(f"{v['found']} of {v['injected']}" if v else "-")
+        out.append(f"| {name} | " + " | ".join(cells) + " |")
+    out += ["", "False alarms of the null worlds by noise kind:", ""]
+    out += ["| noise | " + " | ".join(engines) + " |", rule]
+    kinds = sorted({k for e in engines for k in s[e]["null_by_noise_kind"]})
+    for kind in kinds:
+        cells = []
+        for e in engines:
+            v = s[e]["null_by_noise_kind"].get(kind)
+            cells.append(
+                _cell(round(v["false_alarm_rate"] * v["worlds"]), v["worlds"]) if v else "-"
+            )
+        out.append(f"| {kind} | " + " | ".join(cells) + " |")
+    out += ["", "Reliability of the reported `probability` (effects listed, present or not):", ""]
+    for e in engines:
+        rel = s[e]["reliability"]
+        if not rel.get("pairs"):
+            out.append(f"- {e}: the reports give no `probability`.")
+            continue
+        out.append(f"- {e}: {rel['pairs']} (probability, present) pairs, ECE {rel['ece']:.3f}")
+        out += ["", "| bin | n | mean probability | frequency present |", "|---|---:|---:|---:|"]
+        for b in rel["bins"]:
+            out.append(
+                f"| {b['bin'][0]:.1f}-{b['bin'][1]:.1f} | {b['n']} |"
+                f" {b['mean_probability']:.3f} | {b['frequency_present']:.3f} |"
+            )
+        out.append("")
+    return out
+
+
+def _engines_cost(runs: list[dict]) -> list[str]:
+    """Cost per world: making it, and each engine's diagnosis, by number of samples."""
+    rows = [r for run in runs for r in run["rows"]]
+    engines = [e for e in ("rules", "model") if any(e in r["engines"] for r in rows)]
+    bands = ((0, 2000), (2000, 10000), (10000, 40000), (40000, 100000))
+    out = ["## Cost per world (wall time on the shared 2-core machine)", ""]
+    out.append(
+        "| samples | worlds | make [s] median (max) | "
+        + " | ".join(f"{e} diagnosis [s] median (max)" for e in engines)
+        + " |"
+    )
+    out.append("|---|---:|---:|" + "---:|" * len(engines))
+    for lo, hi in bands:
+        sel = [r for r in rows if lo <= r["samples"] < hi]
+        if not sel:
+            continue
+
+        def med(xs: list[float]) -> str:
+            return f"{sorted(xs)[len(xs) // 2]:.0f} ({max(xs):.0f})" if xs else "-"
+
+        cells = [
+            med([r["engines"][e]["wall_s"] for r in sel if e in r["engines"]]) for e in engines
+        ]
+        out.append(
+            f"| {lo}-{hi} | {len(sel)} | {med([r['make_s'] for r in sel])} | "
+            + " | ".join(cells)
+            + " |"
+        )
+    return out
+
+
+def _engines_storm(runs: list[dict]) -> list[str]:
+    """The storm-pass panel, one column per engine."""
+    rows = [r for run in runs for r in run["rows"]]
+    engines = [e for e in ("rules", "model") if any(r.get("engine") == e for r in rows)]
+    out = ["## The Swarm A storm pass through drawn sensors (`real_pass.py`)", ""]
+    out += ["| | " + " | ".join(engines) + " |", "|---|" + "---:|" * len(engines)]
+    for att in (None, "tumbling", "nadir"):
+        for key, label in (("ok_or_explicit", "right or honest"), ("ok", "right (strict)")):
+            cells = []
+            for e in engines:
+                sel = [r for r in rows if r["engine"] == e and att in (None, r["attitude"])]
+                cells.append(_cell(sum(bool(r[key]) for r in sel), len(sel)))
+            out.append(f"| {label}{', ' + att if att else ''} | " + " | ".join(cells) + " |")
+    return out
+
+
+#: The figures of our simulator's panels (``benchmarks/diagnose_engines.py``), per panel.
+SIM_FIGURES = {
+    "blind": (
+        ("top1", "top-1 verdict, all worlds (one effect or none)"),
+        ("top1_strict", "top-1, strict"),
+        ("min_top1_per_effect", "lowest top-1 of an effect"),
+        ("false_alarm_rate", "null worlds with a false alarm"),
+        ("shrink_vs_oracle_mean", "held-out shrink against the oracle's, mean"),
+    ),
+    "compound": (
+        ("recall", "recall of the observable injected effects"),
+        ("recall_all_injected", "recall of all injected effects"),
+        ("worlds_with_spurious", "worlds with a spurious effect"),
+        ("verdict_among_injected", "verdict among the injected"),
+    ),
+}
+
+
+def _engines_sim(runs: list[dict]) -> list[str]:
+    """Our simulator's panels, one column per engine, one table per run."""
+    out: list[str] = []
+    for run in runs:
+        engines = [e for e in ("rules", "model") if e in run["engines"]]
+        title = "240 blind worlds" if run["panel"] == "blind" else "compound worlds"
+        out += [f"## Our simulator: {title} (`{run['command']}`)", ""]
+        out += ["| | " + " | ".join(engines) + " |", "|---|" + "---:|" * len(engines)]
+        for key, label in SIM_FIGURES[run["panel"]]:
+            cells = []
+            for e in engines:
+                v = run["engines"][e]["summary"].get(key)
+                cells.append(
+                    f"{100 * v:.1f} %"
+                    if isinstance(v, float) and key != "shrink_vs_oracle_mean"
+                    else f"{v}"
+                )
+            out.append(f"| {label} | " + " | ".join(cells) + " |")
+        out.append("")
+    return out
+
+
+def engines_page(runs: list[dict], label: str) -> str:
+    """``benchmarks/results/diagnose_independent_engines.md``: every panel of ``runs``."""
+    sim = [r for r in runs if "panel" in r]
+    worlds = [r for r in runs if r["rows"] and "injected" in r["rows"][0]]
+    storm = [r for r in runs if r["rows"] and "attitude" in r["rows"][0]]
+    lines = [
+        "# The diagnosis engines side by side, same worlds, one run (issue 43)",
+        "",
+        f"**{label}.** Generated by `benchmarks/independent/tables.py --engines`; do not edit.",
+        "Runs:",
+        "",
+        *[f"- `{r['command']}` at {r['commit']} ({r['wall_s']:.0f} s)" for r in runs],
+        "",
+    ]
+    if worlds:
+        lines += [*_engines_worlds(worlds), "", *_engines_cost(worlds), ""]
+    if storm:
+        lines += [*_engines_storm(storm), ""]
+    if sim:
+        lines += _engines_sim(sim)
+    return "\n".join(lines)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--real-summary", nargs="+", type=Path, default=[])
@@ -205,7 +389,21 @@ def main() -> None:
     ap.add_argument("--worlds", nargs="*", default=[])
     ap.add_argument("--real-runs", nargs="*", default=[], help="LABEL=FILE, one row each")
     ap.add_argument("--pooled", nargs="*", default=[], help="LABEL=FILE,FILE: worlds pooled")
+    ap.add_argument(
+        "--engines", nargs="*", type=Path, default=[], help="runs, engines side by side"
+    )
+    ap.add_argument("--label", default="", help="what the runs are (tuning or validation seeds)")
+    ap.add_argument("--write", type=Path, default=None, help="write the --engines page here")
     args = ap.parse_args()
+    if args.engines:
+        from common import read_json
+
+        page = engines_page([read_json(p) for p in args.engines], args.label)
+        if args.write is not None:
+            args.write.write_text(page)
+        else:
+            print(page)
+        return
     lines: list[str] = []
     if args.real_summary:
         lines += [*_real_summary(args.real_summary), ""]

@@ -1,63 +1,77 @@
-"""An independent world generator: shares no code with ``orbitcal``.
+"""An independent world generator: shares no code, and no effect template, with ``orbitcal``.
 
 Orbit: SGP4 (``sgp4``) from real CelesTrak element sets, TEME -> ITRS and GCRS -> ITRS through
 Skyfield. Main field: IGRF-14 from ppigrf's coefficient file, synthesised by chaosmagpy with the
 coefficients interpolated linearly per sample. Crust: CHAOS-7's static field (degrees 16-185).
-Effects have their own shapes, from the physics rather than from the diagnosis's templates:
 
-* ``temperature``: a sensor temperature from a first-order thermal model driven by the eclipse
-  (cylindrical shadow, Skyfield Sun), with its own time constant; the offsets drift along it,
-  with a small quadratic term; the table's ``temperature`` is that of a nearby thermistor
-  (lagged a little, quantised to 0.1 degC).
-* ``magnetorquer``: B-dot-like commands (sign of the field rate, saturating, duty-cycled off
-  half of each 20 s period) coupled into the sensor by a random 3x3 matrix.
-* ``time_offset``: the sensor samples the field at ``t + dt``.
-* ``external_field``: a ring current along the dipole axis from a Dst series of Burton's equation
-  (an injection for the main phase, then recovery), uniform over the orbit, with a 20 % induced
-  part.
-* ``field_aligned_currents``: sheets of current at the auroral ovals (|mlat| 62-72 deg), a
-  tanh-shaped step of the east component (perpendicular to B), different strength per crossing.
-* ``attitude_error``: small rotations (twice-per-orbit thermal flex plus a random walk).
-* ``orbit_error``: the truth is propagated from a later element set of the same satellite; the
-  user is given the older one.
-* ``crustal_field``: CHAOS-7 static field, degrees 16-185 (none below 21 in CHAOS-7), scaled.
+Every one of the eleven effects of CONTRACT section 5 can be drawn (:data:`EFFECTS`), one to
+three at once, with shapes the catalogue does not write (``shapes.py``): a temperature that moves
+the scale factors as well as the offsets, a torquer whose field lags its command, a partial ring
+current with a local-time asymmetry, Sq and the equatorial electrojet (and a solar-array stray
+field) for the sun-driven field, star-tracker head switches for the attitude error, cross-axis
+nonlinearity, settling offsets and a sigmoid scale change for the drift, region-1/2 auroral
+sheets, a time-tag error that drifts, the truth propagated from a later element set for the orbit
+error, CHAOS-7's crust. Noise (``noise.py``): white, pink, random walk, AR(1), a different kind
+and level per axis, quantised, spikes, gaps. Spans of 2-24 h (log-uniform), cadences of 1-30 s.
 
-Noise kinds: ``white``, ``pink`` (1/f), ``random_walk``, ``quantised``, ``spikes``, ``gaps``.
+Every world records its truth: the effects injected with the parameters drawn for each
+(``World.truth["effects"]``), the noise per axis, the span, the cadence and the attitude.
 """
 
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
+import shapes
 from common import (
     REPO,
     Sensor,
     draw_sensor,
     nadir_body_to_frame,
+    nec_basis,
     nec_to_itrs,
+    spherical_to_itrs_km,
     tumbling_body_to_frame,
     write_table,
 )
-from scipy.spatial.transform import Rotation
+from noise import NOISE_KINDS, damage, sensor_noise
+from scipy.spatial.transform import Rotation, Slerp
+
+__all__ = [
+    "EFFECTS",
+    "NOISE_KINDS",
+    "World",
+    "draw_effects",
+    "make_world",
+    "nec_basis",
+    "spherical_to_itrs_km",
+]
 
 TLE_FILE = REPO / "tests" / "authorities" / "swarm_iss_real_tles.tle"
 CHAOS_FILE = REPO / "tests" / "authorities" / "CHAOS-7.mat"
 R_EARTH_KM = 6371.2
+#: The eleven effects of CONTRACT section 5 (``none`` aside).
 EFFECTS = (
     "temperature",
     "magnetorquer",
     "time_offset",
     "external_field",
+    "crustal_field",
+    "sun_driven",
+    "nonlinearity",
+    "orbit_error",
+    "parameter_drift",
     "field_aligned_currents",
     "attitude_error",
-    "orbit_error",
-    "crustal_field",
 )
-NOISE_KINDS = ("white", "pink", "random_walk", "quantised", "spikes", "gaps")
+ORBIT_S = 5650.0  # about one orbit at 450-500 km [s]
+SPAN_H = (2.0, 24.0)
+CADENCES_S = (1.0, 2.0, 5.0, 10.0, 15.0, 20.0, 30.0)
 
 
 @dataclass
@@ -196,10 +210,13 @@ def igrf14_itrs_nt(t_unix_s: np.ndarray, r_itrs_km: np.ndarray) -> np.ndarray:
 
 
 def dipole_axis_itrs(t_unix_s: float) -> np.ndarray:
+    """Unit vector to the geomagnetic north pole (boreal; the dipole moment points the other
+    way). Until 2026-11-28 the comment here said "points south" and the ring current was added
+    along it with the wrong sign (a storm that raised the field)."""
     time_dy, coeffs = _igrf_coefficients()
     day = float(_mjd2000(np.array([t_unix_s]))[0])
     g10, g11, h11 = (np.interp(day, time_dy, coeffs[k]) for k in range(3))
-    m = -np.array([g11, h11, g10])  # direction of the dipole moment (points south)
+    m = -np.array([g11, h11, g10])
     return m / np.linalg.norm(m)
 
 
@@ -234,25 +251,17 @@ def crust_itrs_nt(
     return nec_to_itrs(full, r_itrs_km)
 
 
-def magnetic_latitude_deg(r_itrs_km: np.ndarray, axis: np.ndarray) -> np.ndarray:
+def magnetic_latitude_deg(r_itrs_km: np.ndarray, north: np.ndarray) -> np.ndarray:
+    """Dipole latitude [deg], positive towards ``north`` (:func:`dipole_axis_itrs`)."""
     u = r_itrs_km / np.linalg.norm(r_itrs_km, axis=1, keepdims=True)
-    return np.degrees(np.arcsin(np.clip(-u @ axis, -1, 1)))
+    return np.degrees(np.arcsin(np.clip(u @ north, -1, 1)))
 
 
-def colored_noise(rng: np.random.Generator, n: int, kind: str, sigma: float) -> np.ndarray:
-    """(n, 3) noise of RMS ~sigma per component."""
-    if kind == "pink":
-        white = rng.normal(size=(n, 3))
-        spec = np.fft.rfft(white, axis=0)
-        f = np.fft.rfftfreq(n)
-        f[0] = f[1]
-        x = np.fft.irfft(spec / np.sqrt(f)[:, None], n=n, axis=0)
-        return sigma * x / x.std(axis=0)
-    if kind == "random_walk":
-        walk = np.cumsum(rng.normal(size=(n, 3)), axis=0)
-        walk -= walk.mean(axis=0)
-        return 0.5 * sigma * rng.normal(size=(n, 3)) + sigma * walk / walk.std(axis=0)
-    return sigma * rng.normal(size=(n, 3))
+def dip_latitude_deg(b_itrs_nt: np.ndarray, r_itrs_km: np.ndarray) -> np.ndarray:
+    """Dip latitude [deg] from the main field's inclination: atan(tan(I) / 2)."""
+    nec = np.einsum("nki,ni->nk", nec_basis(r_itrs_km), b_itrs_nt)
+    incl = np.arctan2(nec[:, 2], np.hypot(nec[:, 0], nec[:, 1]))
+    return np.degrees(np.arctan(0.5 * np.tan(incl)))
 
 
 @dataclass
@@ -263,7 +272,9 @@ class World:
     tle_given: TleSet
     extra: dict[str, np.ndarray]
     effects: list[str]
-    truth: dict[str, float] = field(default_factory=dict)
+    #: ``effects``: {name: parameters drawn}; ``dt_s`` (mean time-tag error, when drawn);
+    #: ``noise``, ``span_h``, ``cadence_s``, ``attitude``, ``columns``.
+    truth: dict = field(default_factory=dict)
     noise: str = "white"
     sensor: Sensor | None = None
     #: The element set the truth was propagated from (the user is given ``tle_given``).
@@ -274,160 +285,113 @@ class World:
         tle.write_text(self.tle_given.text())
 
 
+def draw_effects(rng: np.random.Generator, most: int = 3) -> list[str]:
+    """One to ``most`` distinct effects, each of the eleven equally likely."""
+    k = int(rng.integers(1, most + 1))
+    return sorted(str(e) for e in rng.choice(EFFECTS, size=k, replace=False))
+
+
+def draw_span_and_cadence(rng: np.random.Generator) -> tuple[float, float]:
+    """Span [h], log-uniform over 2-24 h, and a cadence [s] among 1-30 s."""
+    span_h = float(np.exp(rng.uniform(np.log(SPAN_H[0]), np.log(SPAN_H[1]))))
+    return span_h, float(rng.choice(CADENCES_S))
+
+
+def _time_tag(rng: np.random.Generator, t: np.ndarray, truth: dict) -> np.ndarray:
+    """A time-tag error that drifts: dt(t) = dt0 + rate (t - t0) [s]."""
+    dt0 = float(rng.choice([-1.0, 1.0]) * rng.uniform(0.2, 1.0))
+    rate = float(rng.uniform(-0.2, 0.2)) / max(t[-1] - t[0], 1.0)  # <= 0.2 s over the span
+    dt = dt0 + rate * (t - t[0])
+    truth["effects"]["time_offset"] = {"dt0_s": dt0, "drift_s_over_span": rate * (t[-1] - t[0])}
+    truth["dt_s"] = float(dt.mean())
+    return dt
+
+
 def make_world(
     rng: np.random.Generator,
     effects: list[str],
     *,
     noise: str = "white",
     small_unmodelled: bool = False,
-    orbits: float = 4.0,
-    cadence_s: float = 10.0,
+    span_h: float | None = None,
+    cadence_s: float | None = None,
     exclude: frozenset[str] = frozenset(),
 ) -> World:
     """One world: ``effects`` injected at drawn strengths, ``noise`` of the given kind.
 
+    ``span_h`` / ``cadence_s``: drawn (:func:`draw_span_and_cadence`) unless given.
     ``exclude``: effects drawn (every random number as without it, so the same seed gives the
     same world otherwise) but not applied: the world without them, for the observability oracle
     (``oracle.py``). The attitude the table gives, the user's element set and the thermistor and
     torquer columns stay those of the whole world.
     """
+    unknown = sorted(set(effects) - set(EFFECTS))
+    if unknown or noise not in NOISE_KINDS:
+        raise ValueError(f"unknown effects {unknown} or noise kind {noise!r}")
 
     def on(name: str) -> bool:
         return name in effects and name not in exclude
 
+    drawn_span, drawn_cadence = draw_span_and_cadence(rng)
+    span_h = drawn_span if span_h is None else span_h
+    cadence_s = drawn_cadence if cadence_s is None else cadence_s
     pairs = tle_pairs()
     if "field_aligned_currents" in effects:
         pairs = [p for p in pairs if p[0].norad != 25544]  # polar orbits only
     older, newer = pairs[int(rng.integers(len(pairs)))]
     given = older if "orbit_error" in effects else newer
     start = newer.epoch_unix_s + rng.uniform(0.1, 0.6) * 86400.0
-    duration = orbits * 5650.0
-    t = start + np.arange(0.0, duration, cadence_s)
+    t = start + np.arange(0.0, span_h * 3600.0, cadence_s)
     n = t.size
-    truth: dict[str, float] = {}
-    dt_true = 0.0
-    if "time_offset" in effects:
-        dt_true = float(rng.choice([-1.0, 1.0]) * rng.uniform(0.2, 1.0))
-        truth["dt_s"] = dt_true
-    dt_used = dt_true if on("time_offset") else 0.0
+    truth: dict = {"effects": {}, "span_h": span_h, "cadence_s": cadence_s}
+    if "orbit_error" in effects:
+        truth["effects"]["orbit_error"] = {
+            "element_set_age_days": (newer.epoch_unix_s - older.epoch_unix_s) / 86400.0
+        }
+    dt_true = _time_tag(rng, t, truth) if "time_offset" in effects else np.zeros(n)
+    t_true = t + (dt_true if on("time_offset") else 0.0)
     r_whole = propagate_itrs_km(newer, t + dt_true)  # the attitude's and the Sun's geometry
-    r_true = r_whole if dt_used == dt_true else propagate_itrs_km(newer, t + dt_used)
-    b_itrs = igrf14_itrs_nt(t + dt_used, r_true)
-    axis = dipole_axis_itrs(float(t[0]))
-    mlat = magnetic_latitude_deg(r_true, axis)
-    g2i = gcrs_to_itrs_matrices(t)
-    if "external_field" in effects:
-        tau_h = (t - t[0]) / 3600.0
-        peak = rng.uniform(-150.0, -40.0)
-        onset = rng.uniform(0.0, 3.0)
-        tau_rec = rng.uniform(4, 12)
-        # Burton et al. (1975): dDst/dt = Q - Dst / tau, with a constant injection Q for the
-        # ``onset`` hours of the main phase (chosen so that Dst reaches ``peak``), none after.
-        # (Until 2026-11-26 the main phase rose linearly to 0.3 x the peak and the remaining
-        # 0.7 x came in one sample: a step of 30-105 nT in 10 s that no ring current makes.)
-        main = 1.0 - np.exp(-np.minimum(tau_h, onset) / tau_rec)
-        dst = np.where(
-            tau_h < onset,
-            peak * main / max(1.0 - np.exp(-onset / tau_rec), 1e-9),
-            peak * np.exp(-(tau_h - onset) / tau_rec),
-        )
-        # The ring current's field at the Earth is along the dipole moment (southward) when
-        # Dst < 0; 1.2: a fifth more from the currents it induces in the Earth.
-        if on("external_field"):
-            b_itrs = b_itrs + (-1.2 * dst)[:, None] * axis[None, :]
-        truth["dst_peak_nt"] = float(peak)
-        truth["storm_onset_h"] = float(onset)
-    if "field_aligned_currents" in effects or small_unmodelled:
-        amp = (
-            rng.uniform(80.0, 250.0)
-            if "field_aligned_currents" in effects
-            else rng.uniform(3.0, 8.0)
-        )
-        am = np.abs(mlat)
-        edge_lo, edge_hi = rng.uniform(60, 64), rng.uniform(69, 73)
-        crossing = np.cumsum(np.r_[0, np.diff((am > 55).astype(int)) == 1])
-        strength = amp * rng.uniform(0.5, 1.5, size=crossing.max() + 2)[crossing]
-        sheet = 0.5 * (np.tanh((am - edge_lo) / 1.0) - np.tanh((am - edge_hi) / 1.5))
-        east = np.column_stack([np.zeros(n), strength * sheet * np.sign(mlat), np.zeros(n)])
-        if on("field_aligned_currents") or ("field_aligned_currents" not in effects):
-            b_itrs = b_itrs + nec_to_itrs(east, r_true)
-    if "crustal_field" in effects or small_unmodelled:
-        scale = rng.uniform(1.0, 2.0) if "crustal_field" in effects else 1.0
-        nmin = 16 if "crustal_field" in effects else 100
-        if on("crustal_field") or ("crustal_field" not in effects):
-            b_itrs = b_itrs + scale * crust_itrs_nt(r_true, nmin=nmin)
+    r_true = propagate_itrs_km(newer, t_true)
+    b_itrs = igrf14_itrs_nt(t_true, r_true)
+    north = dipole_axis_itrs(float(t[0]))
+    mlat = magnetic_latitude_deg(r_true, north)
+    g2i = gcrs_to_itrs_matrices(t_true)
+    sun_gcrs = sun_direction_gcrs(t_true)
+    sun_itrs = np.einsum("nij,nj->ni", g2i, sun_gcrs)
+    mlt = shapes.magnetic_local_time_h(r_true, north, sun_itrs)
+    b_itrs = b_itrs + _geophysical(
+        rng, effects, on, small_unmodelled, t, r_true, b_itrs, north, mlat, mlt, sun_itrs, truth
+    )
     # Attitude and the body frame.
-    r_gcrs = np.einsum("nji,nj->ni", g2i, r_whole)
+    r_gcrs = np.einsum("nji,nj->ni", gcrs_to_itrs_matrices(t), r_whole)
     if rng.random() < 0.5:
-        attitude = "tumbling"
+        truth["attitude"] = "tumbling"
         body_to_gcrs = tumbling_body_to_frame(t, rng, float(rng.choice([0.3, 1.0, 2.0])))
     else:
-        attitude = "nadir"
+        truth["attitude"] = "nadir"
         body_to_gcrs = nadir_body_to_frame(r_gcrs, t, rng)
-    truth_att = body_to_gcrs
+    truth_att = whole_att = body_to_gcrs
     if "attitude_error" in effects:
-        period = 5650.0
-        amp = np.radians(rng.uniform(0.03, 0.1))
-        flex = amp * np.sin(4 * np.pi * (t - t[0]) / period + rng.uniform(0, 6.3))
-        walk = np.cumsum(rng.normal(size=(n, 3)), axis=0)
-        walk = 0.5 * amp * walk / np.abs(walk).max()
-        rv = walk + np.outer(flex, rng.normal(size=3) / np.sqrt(3))
-        if on("attitude_error"):
-            truth_att = body_to_gcrs * Rotation.from_rotvec(rv)
-        truth["attitude_error_deg"] = float(np.degrees(amp))
-    if dt_used != 0.0:
-        # A time-tag error of the magnetometer: the whole sample belongs to t + dt -- the
-        # position (above), the Earth's rotation and the body's attitude.
-        from scipy.spatial.transform import Slerp
-
-        t_true = np.clip(t + dt_true, t[0], t[-1])
-        truth_att = Slerp(t, truth_att)(t_true)
-        g2i = gcrs_to_itrs_matrices(t + dt_true)
-    b_gcrs = np.einsum("nji,nj->ni", g2i, b_itrs)
-    b_body = truth_att.inv().apply(b_gcrs)
+        rv, truth["effects"]["attitude_error"] = shapes.star_tracker_steps(rng, t, ORBIT_S)
+        whole_att = body_to_gcrs * Rotation.from_rotvec(rv)
+        truth_att = whole_att if on("attitude_error") else body_to_gcrs
+    if on("time_offset"):
+        # the whole sample belongs to t + dt: the position (above), the Earth's rotation and
+        # the body's attitude
+        truth_att = Slerp(t, truth_att)(np.clip(t_true, t[0], t[-1]))
+    b_body = truth_att.inv().apply(np.einsum("nji,nj->ni", g2i, b_itrs))
+    sunlit_frac = sunlit(r_gcrs, sun_direction_gcrs(t))
+    # the Sun on the body as the spacecraft really turns (the same with ``exclude``)
+    sun_body = whole_att.inv().apply(sun_direction_gcrs(t))
     sensor = draw_sensor(rng, matrix_pct=(0.5, 2.0), offset_nt=(20.0, 300.0), noise_nt=(1.0, 3.0))
-    raw = b_body @ sensor.a.T + sensor.offset_nt
+    b_sensor = b_body @ sensor.a.T
+    raw = b_sensor + sensor.offset_nt
     extra: dict[str, np.ndarray] = {}
-    ill = sunlit(r_gcrs, sun_direction_gcrs(t))
-    if "temperature" in effects:
-        tc = rng.uniform(900.0, 2500.0)
-        temp = np.empty(n)
-        temp[0] = 10.0 + 15.0 * ill[0]
-        for k in range(1, n):
-            drive = -5.0 + 25.0 * ill[k]
-            temp[k] = temp[k - 1] + (drive - temp[k - 1]) * (1 - np.exp(-cadence_s / tc))
-        coef = rng.uniform(0.8, 3.0, size=3) * rng.choice([-1, 1], size=3)
-        dtemp = temp - temp.mean()
-        if on("temperature"):
-            raw = raw + np.outer(dtemp, coef) + 0.01 * np.outer(dtemp**2, coef)
-        lag = np.r_[np.full(3, temp[0]), temp[:-3]]
-        extra["temperature"] = np.round(lag + rng.normal(scale=0.05, size=n), 1)
-        truth["temperature_coef_nt_per_c_max"] = float(np.abs(coef).max())
-    if "magnetorquer" in effects:
-        mmax = rng.uniform(5.0, 20.0)
-        db = np.gradient(b_body, t, axis=0)
-        cmd = -mmax * np.tanh(db / (np.abs(db).mean(axis=0) + 1e-9))
-        duty = ((t - t[0]) % 20.0) < 10.0
-        cmd = cmd * duty[:, None] * (rng.random(n) > 0.1)[:, None]
-        coupling = rng.normal(scale=rng.uniform(3.0, 10.0), size=(3, 3))
-        if on("magnetorquer"):
-            raw = raw + cmd @ coupling.T
-        for k, a in enumerate("xyz"):
-            extra[f"mtq_{a}"] = np.round(cmd[:, k], 3)
-    sigma = sensor.noise_nt
-    kind = "white" if noise in ("quantised", "spikes", "gaps") else noise
-    raw = raw + colored_noise(rng, n, kind, sigma)
-    if noise == "quantised":
-        raw = np.round(raw / (2.0 * sigma)) * (2.0 * sigma)
-    if noise == "spikes":
-        hit = rng.random(n) < 0.005
-        raw[hit] += rng.normal(scale=300.0, size=(int(hit.sum()), 3))
-    keep = np.ones(n, dtype=bool)
-    if noise == "gaps":
-        for _ in range(int(rng.integers(3, 7))):
-            a = int(rng.integers(0, n - 60))
-            keep[a : a + int(rng.integers(10, 60))] = False
-    w = World(
+    raw = raw + _instrumental(rng, effects, on, t, b_sensor, sunlit_frac, sun_body, extra, truth)
+    noise_nt, truth["noise"] = sensor_noise(rng, t, noise, sensor.noise_nt)
+    raw, keep = damage(rng, raw + noise_nt, noise, sensor.noise_nt)
+    truth["columns"] = sorted(extra)
+    return World(
         t_unix_s=t[keep],
         b_raw_nt=raw[keep],
         body_to_gcrs=body_to_gcrs[np.flatnonzero(keep)],
@@ -439,5 +403,104 @@ def make_world(
         sensor=sensor,
         tle_truth=newer,
     )
-    w.truth["attitude"] = attitude  # type: ignore[assignment]
-    return w
+
+
+Arr = np.ndarray
+
+
+def _geophysical(
+    rng: np.random.Generator,
+    effects: list[str],
+    on: Callable[[str], bool],
+    small: bool,
+    t: Arr,
+    r_itrs: Arr,
+    b_main_itrs: Arr,
+    north: Arr,
+    mlat: Arr,
+    mlt: Arr,
+    sun_itrs: Arr,
+    truth: dict,
+) -> Arr:
+    """The fields of the Earth's environment the effects add [nT] (N, 3), in ITRS."""
+    added = np.zeros_like(r_itrs)
+    if "external_field" in effects:
+        size, truth["effects"]["external_field"] = shapes.partial_ring_current(rng, t, mlt)
+        if on("external_field"):
+            # a fifth more from the currents the storm induces in the Earth
+            added += 1.2 * size[:, None] * north[None, :]
+    if "field_aligned_currents" in effects or small:
+        amp = rng.uniform(80.0, 250.0) if "field_aligned_currents" in effects else rng.uniform(3, 8)
+        east, fac_truth = shapes.auroral_currents(rng, t, mlat, mlt, float(amp))
+        if "field_aligned_currents" in effects:
+            truth["effects"]["field_aligned_currents"] = fac_truth
+        if on("field_aligned_currents") or "field_aligned_currents" not in effects:
+            zero = np.zeros(len(t))
+            added += nec_to_itrs(np.column_stack([zero, east, zero]), r_itrs)
+    if "sun_driven" in effects:
+        dip = dip_latitude_deg(b_main_itrs, r_itrs)
+        sq, truth["effects"]["sun_driven"] = shapes.sq_and_electrojet(
+            rng, r_itrs, sun_itrs, dip, nec_basis(r_itrs)
+        )
+        if on("sun_driven"):
+            added += sq
+    if "crustal_field" in effects or small:
+        scale = rng.uniform(1.0, 2.0) if "crustal_field" in effects else 1.0
+        nmin = 16 if "crustal_field" in effects else 100
+        if "crustal_field" in effects:
+            truth["effects"]["crustal_field"] = {"chaos7_scale": float(scale), "degrees": "16-185"}
+        if on("crustal_field") or "crustal_field" not in effects:
+            stride = max(1, round(20.0 / float(t[1] - t[0])))  # every ~20 s, interpolated
+            added += scale * crust_itrs_nt(r_itrs, nmin=nmin, stride=stride)
+    return added
+
+
+def _instrumental(
+    rng: np.random.Generator,
+    effects: list[str],
+    on: Callable[[str], bool],
+    t: Arr,
+    b_sensor: Arr,
+    sunlit_frac: Arr,
+    sun_body: Arr,
+    extra: dict[str, Arr],
+    truth: dict,
+) -> Arr:
+    """What the spacecraft and the sensor add [nT] (N, 3); fills the table's extra columns."""
+    added = np.zeros_like(b_sensor)
+    eff = truth["effects"]
+    # a thermistor and torquer commands are in half the worlds without the effect too
+    has_temp = "temperature" in effects or rng.random() < 0.5
+    has_mtq = "magnetorquer" in effects or rng.random() < 0.5
+    if has_temp:
+        field_nt, extra["temperature"], temp_truth = shapes.thermal_sensor(
+            rng, t, sunlit_frac, sun_body, b_sensor
+        )
+        if "temperature" in effects:
+            eff["temperature"] = temp_truth
+        if on("temperature"):
+            added += field_nt
+    if has_mtq:
+        cmd, control_t, control_u, cmd_truth = shapes.torquer_commands(rng, t, b_sensor)
+        field_nt, lag_truth = shapes.lagged_torquer(rng, t, control_t, control_u)
+        if "magnetorquer" in effects:
+            eff["magnetorquer"] = {**cmd_truth, **lag_truth}
+        if on("magnetorquer"):
+            added += field_nt
+        for k, a in enumerate("xyz"):
+            extra[f"mtq_{a}"] = np.round(cmd[:, k], 3)
+    if "sun_driven" in effects:
+        array_nt, array_truth = shapes.solar_array_field(rng, sun_body, sunlit_frac)
+        with_array = bool(rng.random() < 0.5)
+        eff["sun_driven"].update(array_truth, solar_array=with_array)
+        if on("sun_driven") and with_array:
+            added += array_nt
+    if "nonlinearity" in effects:
+        field_nt, eff["nonlinearity"] = shapes.cross_nonlinearity(rng, b_sensor)
+        if on("nonlinearity"):
+            added += field_nt
+    if "parameter_drift" in effects:
+        field_nt, eff["parameter_drift"] = shapes.settling_drift(rng, t, b_sensor)
+        if on("parameter_drift"):
+            added += field_nt
+    return added
