@@ -66,7 +66,7 @@ def _tiny(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray,
 
 
 def _log_normal(y: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> float:
-    sign, logdet = np.linalg.slogdet(cov)
+    _sign, logdet = np.linalg.slogdet(cov)
     d = y - mean
     return float(-0.5 * (logdet + d @ np.linalg.solve(cov, d) + y.size * np.log(2 * np.pi)))
 
