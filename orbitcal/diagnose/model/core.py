@@ -25,15 +25,18 @@ from orbitcal.diagnose.design import DesignBlock
 from orbitcal.diagnose.effects import CATALOGUE, Effect
 from orbitcal.diagnose.model.confirm import Confirmation, confirm
 from orbitcal.diagnose.model.evidence import (
+    Augmented,
     Posterior,
     Projected,
+    augment,
+    averaged,
     form_evidence,
     log_evidence,
     posterior,
     project,
 )
-from orbitcal.diagnose.model.gram import Form, apply_model, group_prior, whitened_gram
-from orbitcal.diagnose.model.noise_model import AxisNoise, fit_noise
+from orbitcal.diagnose.model.gram import Form, Gram, apply_model, group_prior, whitened_gram
+from orbitcal.diagnose.model.noise_model import AxisNoise, fit_noise, noise_skip
 from orbitcal.diagnose.options import ModelOptions
 
 __all__ = ["ModelDiagnosis", "candidate_forms", "model_diagnosis", "run_starts"]
@@ -64,6 +67,9 @@ class ModelDiagnosis:
         Per candidate, its parameters' posterior mean (in the chosen model, else alone).
     forms : dict of str to str
         Per candidate, the form its evidence preferred (its design block's ``variant``).
+    noise_weights : tuple of float
+        Posterior weights of the noise models tried (of the calibration's residual, of the
+        encompassing model's); ``noise`` is the heavier.
     """
 
     posterior: Posterior
@@ -73,6 +79,7 @@ class ModelDiagnosis:
     absorbed: dict[str, float] = field(default_factory=dict)
     params: dict[str, dict[str, float]] = field(default_factory=dict)
     forms: dict[str, str] = field(default_factory=dict)
+    noise_weights: tuple[float, ...] = ()
 
     def inclusion(self) -> dict[str, float]:
         """Posterior inclusion probability per candidate."""
@@ -151,28 +158,41 @@ def _beta(
     return np.asarray(proj.cc_pinv @ (gram_cy - gram_ce @ theta))
 
 
-def _noise_model(
+#: Prior standard deviation of each calibration coefficient around its least-squares value [nT]
+#: (a matrix element times FIELD_SCALE_NT, or an offset): 5 % of the field, wide enough that
+#: it decides nothing the data tell; proper, so that noise models compare (``evidence``).
+CAL_PRIOR_SD_NT = 2500.0
+
+
+def _noise_candidates(
     data: DiagnosisData, index: IntArray, starts: IntArray, forms: Sequence[Form], max_order: int
-) -> tuple[AxisNoise, ...]:
-    """The noise model of the encompassing model's training residual (every candidate's first
-    form at its posterior mean under unit noise): what no candidate explains."""
+) -> tuple[list[tuple[AxisNoise, ...]], FloatArray]:
+    """Two noise models of the training residual -- of the calibration alone, and of the
+    encompassing model (every candidate's first form at its posterior mean under unit noise:
+    what no candidate explains) -- and the calibration's least-squares value."""
     gram = whitened_gram(data, index, starts, forms, (_UNIT,) * 3)
     proj = project(gram)
+    zero = np.zeros(max((f.cols.stop for f in forms), default=0))
+    beta_ls = _beta(proj, gram.ce, gram.cy, zero)
+    out = [fit_noise(apply_model(data, index, forms, beta_ls, zero), starts, max_order=max_order)]
     firsts = [f for i, f in enumerate(forms) if i == 0 or forms[i - 1].effect != f.effect]
-    cols = np.concatenate([np.arange(f.cols.start, f.cols.stop) for f in firsts]).astype(np.intp)
-    mean = np.concatenate([f.prior_mean for f in firsts]) if firsts else np.zeros(0)
-    sd = np.concatenate([f.prior_sd for f in firsts]) if firsts else np.zeros(0)
-    _, theta = log_evidence(proj, cols, mean, sd) if firsts else (0.0, np.zeros(0))
-    full = _theta_full(forms, firsts, theta)
-    beta = _beta(proj, gram.ce, gram.cy, full)
-    return fit_noise(apply_model(data, index, forms, beta, full), starts, max_order=max_order)
+    if firsts:
+        cols = np.concatenate([np.arange(f.cols.start, f.cols.stop) for f in firsts])
+        mean = np.concatenate([f.prior_mean for f in firsts])
+        sd = np.concatenate([f.prior_sd for f in firsts])
+        _, theta = log_evidence(proj, cols.astype(np.intp), mean, sd)
+        full = _theta_full(forms, firsts, theta)
+        beta = _beta(proj, gram.ce, gram.cy, full)
+        residual = apply_model(data, index, forms, beta, full)
+        out.append(fit_noise(residual, starts, max_order=max_order))
+    return out, beta_ls
 
 
-def _best_forms(proj: Projected, forms: Sequence[Form]) -> list[Form]:
+def _best_forms(aug: Augmented, forms: Sequence[Form]) -> list[Form]:
     """Per effect, the form of greatest evidence alone (its choice paid for by ``n_forms``)."""
     best: dict[str, tuple[float, Form]] = {}
     for f in forms:
-        ev = form_evidence(proj, f)
+        ev = form_evidence(aug, f)
         if f.effect not in best or ev > best[f.effect][0]:
             best[f.effect] = (ev, f)
     return [best[e][1] for e in dict.fromkeys(f.effect for f in forms)]
@@ -190,54 +210,89 @@ def _absorbed(proj: Projected, forms: Sequence[Form]) -> dict[str, float]:
     return out
 
 
+@dataclass(frozen=True)
+class _Fitted:
+    """The posterior under one noise model."""
+
+    noise: tuple[AxisNoise, ...]
+    gram: Gram
+    best: list[Form]
+    post: Posterior
+
+
+def _under(
+    data: DiagnosisData,
+    index: IntArray,
+    starts: IntArray,
+    forms: Sequence[Form],
+    noise: tuple[AxisNoise, ...],
+    cal_mean: FloatArray,
+    options: ModelOptions,
+) -> _Fitted:
+    skip = noise_skip(options.noise_max_order)
+    gram = whitened_gram(data, index, starts, forms, noise, skip=skip)
+    aug = augment(gram, cal_mean, np.full(12, CAL_PRIOR_SD_NT), gram.log_scale)
+    best = _best_forms(aug, forms)
+    post = posterior(
+        aug,
+        best,
+        expected_effects=options.expected_effects,
+        max_effects=options.max_effects,
+        n_catalogue=len(CATALOGUE),
+    )
+    return _Fitted(noise, gram, best, post)
+
+
 def model_diagnosis(
     data: DiagnosisData,
     train: BoolArray,
     holdout: BoolArray,
     options: ModelOptions = ModelOptions(),
     forms: Sequence[Form] | None = None,
+    confirm_model: Sequence[str] | None = None,
 ) -> ModelDiagnosis:
     """The model core on ``data``: selection on ``train`` only, one confirmation on ``holdout``.
 
     ``forms`` (from :func:`candidate_forms` on the same data and training span) may be given
-    to reuse the design between calls on the same world.
+    to reuse the design between calls on the same world. ``confirm_model`` (candidates' names,
+    at most ``max_effects``) confirms that model instead of the chosen one: for measuring the
+    confirmation's size on null worlds (``benchmarks/diagnose_model.py``).
     """
     forms = list(candidate_forms(data, train, options) if forms is None else forms)
     index = estimation_samples(train)
     step = int(np.median(np.diff(index))) if index.size > 1 else 1
     starts = run_starts(data, index, step)
-    noise = _noise_model(data, index, starts, forms, options.noise_max_order)
-    gram = whitened_gram(data, index, starts, forms, noise)
-    proj = project(gram)
-    best = _best_forms(proj, forms)
-    post = posterior(
-        proj,
-        best,
-        expected_effects=options.expected_effects,
-        max_effects=options.max_effects,
-        n_catalogue=len(CATALOGUE),
-    )
+    noises, cal_mean = _noise_candidates(data, index, starts, forms, options.noise_max_order)
+    fits = [_under(data, index, starts, forms, n, cal_mean, options) for n in noises]
+    post, weights = averaged([f.post for f in fits])
+    fit = fits[int(np.argmax(weights))]
     chosen = post.median_model(options.selection_probability)
-    by_effect = {f.effect: f for f in best}
+    if confirm_model is not None:
+        chosen = tuple(confirm_model)
+    by_effect = {f.effect: f for f in fit.best}
     model_key = tuple(sorted(post.effects.index(e) for e in chosen))
-    theta = post.thetas[post.models.index(model_key)]
+    params = post.thetas[post.models.index(model_key)]
     chosen_forms = [by_effect[e] for e in sorted(chosen, key=post.effects.index)]
-    full = _theta_full(forms, chosen_forms, theta)
-    beta = _beta(proj, gram.ce, gram.cy, full)
-    beta0 = _beta(proj, gram.ce, gram.cy, np.zeros_like(full))
+    full = _theta_full(forms, chosen_forms, params[12:])
     h_index = np.flatnonzero(holdout)
     h_starts = run_starts(data, h_index, 1)
-    e_model = apply_model(data, h_index, forms, beta, full)
-    e_base = apply_model(data, h_index, forms, beta0, np.zeros_like(full)) if chosen else e_model
-    conf = confirm(e_base, e_model, noise, h_starts)
+    e_model = apply_model(data, h_index, forms, params[:12], full)
+    e_base = (
+        apply_model(data, h_index, forms, post.thetas[0][:12], np.zeros_like(full))
+        if chosen
+        else e_model
+    )
     return ModelDiagnosis(
         posterior=post,
         chosen=chosen,
-        confirmation=conf,
-        noise=noise,
-        absorbed=_absorbed(proj, best),
-        params=_params(post, best, chosen_forms, theta),
-        forms={f.effect: f.block.variant for f in best},
+        # whitened by the null's noise model (the calibration's residual): the test's size is
+        # about the calibration alone being right, whatever noise model the selection preferred
+        confirmation=confirm(e_base, e_model, fits[0].noise, h_starts),
+        noise=fit.noise,
+        absorbed=_absorbed(project(fit.gram), fit.best),
+        params=_params(post, fit.best, chosen_forms, params[12:]),
+        forms={f.effect: f.block.variant for f in fit.best},
+        noise_weights=tuple(float(w) for w in weights),
     )
 
 
@@ -252,6 +307,6 @@ def _params(
         k += f.block.width
     for i, f in enumerate(best):
         if f.effect not in out:
-            alone = post.thetas[post.models.index((i,))]
+            alone = post.thetas[post.models.index((i,))][12:]
             out[f.effect] = dict(zip(f.block.names, alone.tolist(), strict=True))
     return out

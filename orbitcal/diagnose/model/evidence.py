@@ -2,20 +2,22 @@
 
 In whitened space (unit innovations) a model ``S`` is the Gaussian linear model
 
-    y = X_cal beta + X_S theta + e,    e ~ N(0, I),  theta ~ N(mu, diag(s^2)),
+    y = X_cal beta + X_S theta + e,    e ~ N(0, I),
+    beta ~ N(beta_0, diag(v^2)),  theta ~ N(mu, diag(s^2)),
 
-with a flat prior on the 12 calibration parameters ``beta`` (common to every model, so its
-improper constant cancels in the posterior). Integrating ``beta`` out projects ``y`` and ``X_S``
-on the complement of the calibration's columns (``P = I - X_cal X_cal^+``); integrating
-``theta``, with ``z = P (y - X_S mu)``, ``G = X_S' P X_S`` and ``u = diag(s) X_S' z``:
+the calibration a group present in every model, with a wide proper prior centred on its
+least-squares value (so that models whitened by different noise models compare: an improper
+prior's constant would not cancel between them). With ``X = [X_cal X_S]``, ``m = [beta_0 mu]``,
+``D = diag([v s])``, ``z = y - X m``, ``G = X'X`` and ``u = D X' z``, Woodbury's identity on
+``y ~ N(X m, I + X D^2 X')`` gives
 
-    -2 log m(S) = log det(I + diag(s) G diag(s)) + z'z - u' (I + diag(s) G diag(s))^-1 u + const
+    -2 log m(S) = log det(I + D G D) + z'z - u' (I + D G D)^-1 u     (+ n log 2 pi)
 
-(Woodbury's identity on ``z ~ N(0, I + P X_S diag(s^2) X_S' P)``). Every term is a block of the one
-Gram matrix (:class:`~orbitcal.diagnose.model.gram.Gram`), so ~230 models cost ~230 Cholesky
-factorisations of at most a few tens of rows. An effect whose columns the calibration absorbs has
-``G`` near zero: its evidence equals the null's, and its inclusion probability stays at the prior,
-which is how "cannot be separated from the calibration" is read.
+Every term is a block of the one Gram matrix (:class:`~orbitcal.diagnose.model.gram.Gram`), so
+~230 models cost ~230 Cholesky factorisations of at most a few tens of rows. An effect whose
+columns the calibration absorbs leaves the evidence as the calibration alone has it: its
+inclusion probability stays at the prior, which is how "cannot be separated from the
+calibration" is read (:func:`project` measures how much of each group the calibration takes).
 
 The prior on models: each of the ``K`` candidate effects present independently with probability
 ``pi = expected_effects / K`` (so that a larger catalogue does not make more effects likely: Scott
@@ -24,6 +26,7 @@ The prior on models: each of the ``K`` candidate effects present independently w
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 from collections.abc import Sequence
@@ -35,7 +38,7 @@ import numpy.typing as npt
 from orbitcal.arrays import FloatArray
 from orbitcal.diagnose.model.gram import Form, Gram
 
-__all__ = ["Posterior", "Projected", "log_evidence", "posterior", "project"]
+__all__ = ["Augmented", "Posterior", "Projected", "augment", "log_evidence", "posterior", "project"]
 
 
 @dataclass(frozen=True)
@@ -47,6 +50,32 @@ class Projected:
     b: FloatArray  # X_E' P y
     q: float  # y' P y
     g_raw_diag: FloatArray  # diag(X_E' X_E)
+
+
+@dataclass(frozen=True)
+class Augmented:
+    """The whole Gram matrix (calibration columns first) with the calibration's prior.
+
+    ``g``, ``b``, ``q``: ``X'X``, ``X'y``, ``y'y`` over the calibration's 12 columns and then the
+    effect columns; ``cal_mean``, ``cal_sd``: the calibration's prior; ``log_scale``: the sum over
+    whitened rows of ``log sigma`` of their axis (the Jacobian of whitening: what makes the
+    evidence of two noise models compare).
+    """
+
+    g: FloatArray
+    b: FloatArray
+    q: float
+    cal_mean: FloatArray
+    cal_sd: FloatArray
+    log_scale: float
+
+
+def augment(gram: Gram, cal_mean: FloatArray, cal_sd: FloatArray, log_scale: float) -> Augmented:
+    """The Gram matrix as one block (calibration columns first)."""
+    g = np.block([[gram.cc, gram.ce], [gram.ce.T, gram.ee]])
+    return Augmented(
+        0.5 * (g + g.T), np.r_[gram.cy, gram.ey], gram.yy, cal_mean, cal_sd, log_scale
+    )
 
 
 def _pinv_psd(a: FloatArray) -> FloatArray:
@@ -67,7 +96,7 @@ def project(gram: Gram) -> Projected:
 
 
 def log_evidence(
-    proj: Projected, cols: npt.NDArray[np.intp], mean: FloatArray, sd: FloatArray
+    proj: Projected | Augmented, cols: npt.NDArray[np.intp], mean: FloatArray, sd: FloatArray
 ) -> tuple[float, FloatArray]:
     """``log m(S)`` up to the constant common to all models, and the posterior mean of
     ``theta`` (the model's parameters, in the order of ``cols``)."""
@@ -88,12 +117,23 @@ def log_evidence(
 
 
 def _cols(forms: Sequence[Form]) -> npt.NDArray[np.intp]:
+    if not forms:
+        return np.zeros(0, dtype=np.intp)
     return np.concatenate([np.arange(f.cols.start, f.cols.stop) for f in forms]).astype(np.intp)
 
 
-def form_evidence(proj: Projected, form: Form) -> float:
+def model_evidence(aug: Augmented, forms: Sequence[Form]) -> tuple[float, FloatArray]:
+    """``log m`` of the calibration with ``forms``, and the posterior mean of its parameters
+    (the calibration's 12, then each form's)."""
+    cols = np.r_[np.arange(12), 12 + _cols(forms)] if forms else np.arange(12)
+    mean = np.concatenate([aug.cal_mean, *(f.prior_mean for f in forms)])
+    sd = np.concatenate([aug.cal_sd, *(f.prior_sd for f in forms)])
+    return log_evidence(aug, cols.astype(np.intp), mean, sd)
+
+
+def form_evidence(aug: Augmented, form: Form) -> float:
     """``log m`` of the model with this form alone."""
-    return log_evidence(proj, _cols([form]), form.prior_mean, form.prior_sd)[0]
+    return model_evidence(aug, [form])[0]
 
 
 @dataclass(frozen=True)
@@ -151,7 +191,7 @@ class Posterior:
 
 
 def posterior(
-    proj: Projected,
+    aug: Augmented,
     forms: Sequence[Form],
     *,
     expected_effects: float,
@@ -159,7 +199,8 @@ def posterior(
     n_catalogue: int,
 ) -> Posterior:
     """The posterior over every model of at most ``max_effects`` of ``forms``' effects (one form
-    per effect: the caller has chosen it)."""
+    per effect: the caller has chosen it). ``log_evidence`` holds each model's log prior plus
+    log evidence, the Jacobian of whitening included."""
     k = len(forms)
     pi = min(max(expected_effects / max(n_catalogue, 1), 1e-9), 1.0 - 1e-9)
     models: list[tuple[int, ...]] = []
@@ -167,11 +208,8 @@ def posterior(
     for size in range(min(max_effects, k) + 1):
         for model in itertools.combinations(range(k), size):
             chosen = [forms[i] for i in model]
-            cols = _cols(chosen) if chosen else np.zeros(0, dtype=np.intp)
-            mean = np.concatenate([f.prior_mean for f in chosen]) if chosen else np.zeros(0)
-            sd = np.concatenate([f.prior_sd for f in chosen]) if chosen else np.zeros(0)
-            log_m, theta = log_evidence(proj, cols, mean, sd)
-            log_m -= sum(math.log(f.n_forms) for f in chosen)
+            log_m, theta = model_evidence(aug, chosen)
+            log_m -= sum(math.log(f.n_forms) for f in chosen) + aug.log_scale
             prior = size * math.log(pi) + (n_catalogue - size) * math.log1p(-pi)
             models.append(model)
             logs.append(log_m + prior)
@@ -179,4 +217,25 @@ def posterior(
     log_post = np.array(logs)
     prob = np.exp(log_post - log_post.max())
     prob /= prob.sum()
-    return Posterior(tuple(f.effect for f in forms), models, prob, np.array(logs), thetas)
+    return Posterior(tuple(f.effect for f in forms), models, prob, log_post, thetas)
+
+
+def log_marginal(post: Posterior) -> float:
+    """``log p(y)`` under the posterior's noise model: the log-sum of its models' terms."""
+    top = float(post.log_evidence.max())
+    return top + math.log(float(np.sum(np.exp(post.log_evidence - top))))
+
+
+def averaged(posts: Sequence[Posterior]) -> tuple[Posterior, FloatArray]:
+    """The posterior averaged over noise models (each weighted by its ``p(y)``, equal prior
+    weights), and the noise models' posterior weights. Models are matched by their effects;
+    each model's parameters are those under the noise model of greatest weight."""
+    marg = np.array([log_marginal(p) for p in posts])
+    w = np.exp(marg - marg.max())
+    w /= w.sum()
+    best = posts[int(np.argmax(w))]
+    prob = np.zeros(len(best.models))
+    for p, wi in zip(posts, w, strict=True):
+        assert p.effects == best.effects and p.models == best.models
+        prob += wi * p.prob
+    return dataclasses.replace(best, prob=prob / prob.sum()), w

@@ -98,6 +98,8 @@ class Gram:
         The data's square norm.
     n_rows : int
         Whitened rows summed (three per sample, less each run's first).
+    log_scale : float
+        Sum over those rows of ``log sigma`` of their axis's noise model.
     """
 
     cc: FloatArray
@@ -107,6 +109,7 @@ class Gram:
     ey: FloatArray
     yy: float
     n_rows: int
+    log_scale: float = 0.0
 
 
 def _rows(
@@ -132,13 +135,17 @@ def whitened_gram(
     run_start: IntArray,
     forms: Sequence[Form],
     noise: Sequence[AxisNoise],
+    skip: int = 0,
 ) -> Gram:
     """The Gram matrix of the whitened calibration columns, effect columns and measurement over
-    the samples ``index`` (runs ``run_start``, positions in ``index``)."""
+    the samples ``index`` (runs ``run_start``, positions in ``index``). Each run's first
+    ``max(skip, lag)`` samples are left out (``skip`` the same for every noise model: their
+    likelihoods are then of the same rows)."""
     width = max((f.cols.stop for f in forms), default=0)
     full = np.zeros((12 + width + 1, 12 + width + 1))
     n_rows = 0
-    lag = max(n.lag for n in noise)
+    log_scale = 0.0
+    lag = max(skip, *(n.lag for n in noise))
     for lo, a, b in _chunks(index.size, lag):
         part = index[lo:b]
         cal, eff = _rows(data, part, forms, width)
@@ -149,8 +156,10 @@ def whitened_gram(
         for i, nz in enumerate(noise):
             z = np.concatenate([cal, eff[:, i, :], y[:, i : i + 1]], axis=1)
             w, valid = nz.whiten(z, starts)
+            valid &= (np.arange(part.size) - starts) >= skip
             w = w[keep][valid[keep]]
             n_rows += w.shape[0]
+            log_scale += w.shape[0] * float(np.log(nz.sigma_nt))
             ix = np.r_[4 * i : 4 * i + 4, 12 : 12 + width + 1]
             full[np.ix_(ix, ix)] += w.T @ w
     c, e = slice(0, 12), slice(12, 12 + width)
@@ -162,6 +171,7 @@ def whitened_gram(
         ey=full[e, -1],
         yy=float(full[-1, -1]),
         n_rows=n_rows,
+        log_scale=log_scale,
     )
 
 
