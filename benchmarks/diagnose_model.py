@@ -113,7 +113,7 @@ def noise_nt(kind: str, b_nt: np.ndarray, rng: np.random.Generator) -> np.ndarra
         step = rng.uniform(2.0, 8.0)
         return np.round((b_nt + 0.5 * white) / step) * step
     if kind == "spiky":
-        hit = rng.random(n) < 0.005
+        hit = np.asarray(rng.random(n) < 0.005)
         spikes = np.zeros((n, 3))
         spikes[hit] = 300.0 * rng.choice([-1.0, 1.0], size=(int(hit.sum()), 3))
         return b_nt + white + spikes
@@ -141,7 +141,9 @@ def _draw_effects(
 
 def _run(base: Base, b_raw: np.ndarray, confirm_model: Any = None) -> Any:
     data = dataclasses.replace(base.data, b_raw_nt=b_raw)
-    return model_diagnosis(data, base.train, base.holdout, forms=base.forms, confirm_model=confirm_model)
+    return model_diagnosis(
+        data, base.train, base.holdout, forms=base.forms, confirm_model=confirm_model
+    )
 
 
 def calibration(
@@ -183,7 +185,9 @@ def sizes(bases: list[Base], n_nulls: int, rng: np.random.Generator) -> dict[str
     return out
 
 
-def _ece(rows: list[tuple[float, bool, str]], bins: int = 10) -> tuple[float, list[tuple[float, float, int]]]:
+def _ece(
+    rows: list[tuple[float, bool, str]], bins: int = 10
+) -> tuple[float, list[tuple[float, float, int]]]:
     p = np.array([r[0] for r in rows])
     y = np.array([r[1] for r in rows], dtype=float)
     edges = np.linspace(0.0, 1.0, bins + 1)

@@ -35,7 +35,14 @@ from orbitcal.diagnose.model.evidence import (
     posterior,
     project,
 )
-from orbitcal.diagnose.model.gram import Form, Gram, apply_model, group_prior, whitened_gram
+from orbitcal.diagnose.model.gram import (
+    Form,
+    Gram,
+    apply_model,
+    group_prior,
+    whitened_gram,
+    whitened_grams,
+)
 from orbitcal.diagnose.model.noise_model import AxisNoise, fit_noise, noise_skip
 from orbitcal.diagnose.options import ModelOptions
 
@@ -221,16 +228,13 @@ class _Fitted:
 
 
 def _under(
-    data: DiagnosisData,
-    index: IntArray,
-    starts: IntArray,
     forms: Sequence[Form],
+    gram: Gram,
     noise: tuple[AxisNoise, ...],
     cal_mean: FloatArray,
     options: ModelOptions,
 ) -> _Fitted:
-    skip = noise_skip(options.noise_max_order)
-    gram = whitened_gram(data, index, starts, forms, noise, skip=skip)
+    """The posterior under one noise model, from its Gram matrix."""
     aug = augment(gram, cal_mean, np.full(12, CAL_PRIOR_SD_NT), gram.log_scale)
     best = _best_forms(aug, forms)
     post = posterior(
@@ -263,7 +267,9 @@ def model_diagnosis(
     step = int(np.median(np.diff(index))) if index.size > 1 else 1
     starts = run_starts(data, index, step)
     noises, cal_mean = _noise_candidates(data, index, starts, forms, options.noise_max_order)
-    fits = [_under(data, index, starts, forms, n, cal_mean, options) for n in noises]
+    skip = noise_skip(options.noise_max_order)
+    grams = whitened_grams(data, index, starts, forms, noises, skip=skip)
+    fits = [_under(forms, g, n, cal_mean, options) for g, n in zip(grams, noises, strict=True)]
     post, weights = averaged([f.post for f in fits])
     fit = fits[int(np.argmax(weights))]
     chosen = post.median_model(options.selection_probability)

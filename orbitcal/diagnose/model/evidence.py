@@ -73,9 +73,7 @@ class Augmented:
 def augment(gram: Gram, cal_mean: FloatArray, cal_sd: FloatArray, log_scale: float) -> Augmented:
     """The Gram matrix as one block (calibration columns first)."""
     g = np.block([[gram.cc, gram.ce], [gram.ce.T, gram.ee]])
-    return Augmented(
-        0.5 * (g + g.T), np.r_[gram.cy, gram.ey], gram.yy, cal_mean, cal_sd, log_scale
-    )
+    return Augmented(0.5 * (g + g.T), np.r_[gram.cy, gram.ey], gram.yy, cal_mean, cal_sd, log_scale)
 
 
 def _pinv_psd(a: FloatArray) -> FloatArray:

@@ -24,7 +24,15 @@ from orbitcal.diagnose.design import DesignBlock
 from orbitcal.diagnose.effects import block_ranges
 from orbitcal.diagnose.model.noise_model import AxisNoise
 
-__all__ = ["CHUNK_SAMPLES", "Form", "Gram", "apply_model", "group_prior", "whitened_gram"]
+__all__ = [
+    "CHUNK_SAMPLES",
+    "Form",
+    "Gram",
+    "apply_model",
+    "group_prior",
+    "whitened_gram",
+    "whitened_grams",
+]
 
 IntArray = np.ndarray
 
@@ -141,11 +149,23 @@ def whitened_gram(
     the samples ``index`` (runs ``run_start``, positions in ``index``). Each run's first
     ``max(skip, lag)`` samples are left out (``skip`` the same for every noise model: their
     likelihoods are then of the same rows)."""
+    return whitened_grams(data, index, run_start, forms, [noise], skip)[0]
+
+
+def whitened_grams(
+    data: DiagnosisData,
+    index: IntArray,
+    run_start: IntArray,
+    forms: Sequence[Form],
+    noises: Sequence[Sequence[AxisNoise]],
+    skip: int = 0,
+) -> list[Gram]:
+    """:func:`whitened_gram` under each of several noise models, the rows built once."""
     width = max((f.cols.stop for f in forms), default=0)
-    full = np.zeros((12 + width + 1, 12 + width + 1))
-    n_rows = 0
-    log_scale = 0.0
-    lag = max(skip, *(n.lag for n in noise))
+    fulls = [np.zeros((12 + width + 1, 12 + width + 1)) for _ in noises]
+    n_rows = [0] * len(noises)
+    log_scale = [0.0] * len(noises)
+    lag = max(skip, *(n.lag for noise in noises for n in noise))
     for lo, a, b in _chunks(index.size, lag):
         part = index[lo:b]
         cal, eff = _rows(data, part, forms, width)
@@ -153,26 +173,30 @@ def whitened_gram(
         # run starts before the chunk are negative: the kept rows' history is inside it
         starts = run_start[lo:b] - lo
         keep = slice(a - lo, b - lo)
-        for i, nz in enumerate(noise):
+        for i in range(3):
             z = np.concatenate([cal, eff[:, i, :], y[:, i : i + 1]], axis=1)
-            w, valid = nz.whiten(z, starts)
-            valid &= (np.arange(part.size) - starts) >= skip
-            w = w[keep][valid[keep]]
-            n_rows += w.shape[0]
-            log_scale += w.shape[0] * float(np.log(nz.sigma_nt))
             ix = np.r_[4 * i : 4 * i + 4, 12 : 12 + width + 1]
-            full[np.ix_(ix, ix)] += w.T @ w
+            for k, noise in enumerate(noises):
+                w, valid = noise[i].whiten(z, starts)
+                valid &= (np.arange(part.size) - starts) >= skip
+                w = w[keep][valid[keep]]
+                n_rows[k] += w.shape[0]
+                log_scale[k] += w.shape[0] * float(np.log(noise[i].sigma_nt))
+                fulls[k][np.ix_(ix, ix)] += w.T @ w
     c, e = slice(0, 12), slice(12, 12 + width)
-    return Gram(
-        cc=full[c, c],
-        ce=full[c, e],
-        cy=full[c, -1],
-        ee=full[e, e],
-        ey=full[e, -1],
-        yy=float(full[-1, -1]),
-        n_rows=n_rows,
-        log_scale=log_scale,
-    )
+    return [
+        Gram(
+            cc=full[c, c],
+            ce=full[c, e],
+            cy=full[c, -1],
+            ee=full[e, e],
+            ey=full[e, -1],
+            yy=float(full[-1, -1]),
+            n_rows=n,
+            log_scale=ls,
+        )
+        for full, n, ls in zip(fulls, n_rows, log_scale, strict=True)
+    ]
 
 
 def apply_model(
@@ -185,11 +209,12 @@ def apply_model(
     """``b_raw - (calibration + effects)`` at the samples ``index`` [nT], (m, 3): ``beta`` the 12
     calibration parameters (axis ``i``: its row of the matrix / FIELD_SCALE_NT, then its offset),
     ``theta`` the effect parameters (zero for the forms not in the model)."""
+    used = [f for f in forms if np.any(theta[f.cols] != 0.0)]
     width = max((f.cols.stop for f in forms), default=0)
     out = np.empty((index.size, 3))
     for a in range(0, index.size, CHUNK_SAMPLES):
         part = index[a : a + CHUNK_SAMPLES]
-        cal, eff = _rows(data, part, forms, width)
+        cal, eff = _rows(data, part, used, width)  # the forms of the model only
         for i in range(3):
             pred = cal @ beta[4 * i : 4 * i + 4] + eff[:, i, :] @ theta[:width]
             out[a : a + part.size, i] = data.b_raw_nt[part, i] - pred

@@ -10,10 +10,11 @@ The candidates for one axis's residual ``r_t`` (samples in contiguous runs) are
   truncated after :data:`LEVEL_TAPS` taps,
 
 each fitted by conditional least squares on the same samples (every run's first
-:func:`noise_skip` dropped, so that the likelihoods compare) and scored by ``n log(s^2) + (k + 1) log n``. The chosen
-model's filter ``a(L) = 1 - sum phi_k L^k`` (times ``1 - L`` for a random walk) maps the residual
-to its innovations, of standard deviation ``sigma``: every comparison of the model core is made on
-``a(L) x / sigma`` (:meth:`AxisNoise.whiten`), for the data and every column alike.
+:func:`noise_skip` dropped, so that the likelihoods compare) and scored by
+``n log(s^2) + (k + 1) log n``. The chosen model's filter ``a(L) = 1 - sum phi_k L^k`` (times
+``1 - L`` for a random walk) maps the residual to its innovations, of standard deviation
+``sigma``: every comparison of the model core is made on ``a(L) x / sigma``
+(:meth:`AxisNoise.whiten`), for the data and every column alike.
 """
 
 from __future__ import annotations
