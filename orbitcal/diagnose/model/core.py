@@ -13,6 +13,7 @@ The driver names no effect: the catalogue gives each candidate's columns and pri
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -138,7 +139,9 @@ def candidate_forms(
         block = eff.design(data, train)
         if block is None:
             continue
-        blocks = [b for b in (block, *block.alternatives) if b.all_finite()]
+        if not block.all_finite():  # as the rules engine asks; a form with non-finite
+            continue  # columns among the alternatives loses the choice (_best_forms)
+        blocks = [block, *block.alternatives]
         for b in blocks:
             mean, sd = group_prior(b, options.prior_sd_fraction)
             sd = _fill_sd(b, sd, data)
@@ -171,26 +174,33 @@ def _beta(
 CAL_PRIOR_SD_NT = 2500.0
 
 
+def _compact(forms: Sequence[Form]) -> list[Form]:
+    """``forms`` with their columns renumbered side by side (a Gram matrix of these alone)."""
+    out, col = [], 0
+    for f in forms:
+        out.append(dataclasses.replace(f, cols=slice(col, col + f.block.width)))
+        col += f.block.width
+    return out
+
+
 def _noise_candidates(
     data: DiagnosisData, index: IntArray, starts: IntArray, forms: Sequence[Form], max_order: int
 ) -> tuple[list[tuple[AxisNoise, ...]], FloatArray]:
     """Two noise models of the training residual -- of the calibration alone, and of the
     encompassing model (every candidate's first form at its posterior mean under unit noise:
     what no candidate explains) -- and the calibration's least-squares value."""
-    gram = whitened_gram(data, index, starts, forms, (_UNIT,) * 3)
+    firsts = _compact([f for i, f in enumerate(forms) if i == 0 or forms[i - 1].effect != f.effect])
+    gram = whitened_gram(data, index, starts, firsts, (_UNIT,) * 3)
     proj = project(gram)
-    zero = np.zeros(max((f.cols.stop for f in forms), default=0))
+    zero = np.zeros(max((f.cols.stop for f in firsts), default=0))
     beta_ls = _beta(proj, gram.ce, gram.cy, zero)
-    out = [fit_noise(apply_model(data, index, forms, beta_ls, zero), starts, max_order=max_order)]
-    firsts = [f for i, f in enumerate(forms) if i == 0 or forms[i - 1].effect != f.effect]
+    out = [fit_noise(apply_model(data, index, firsts, beta_ls, zero), starts, max_order=max_order)]
     if firsts:
-        cols = np.concatenate([np.arange(f.cols.start, f.cols.stop) for f in firsts])
         mean = np.concatenate([f.prior_mean for f in firsts])
         sd = np.concatenate([f.prior_sd for f in firsts])
-        _, theta = log_evidence(proj, cols.astype(np.intp), mean, sd)
-        full = _theta_full(forms, firsts, theta)
-        beta = _beta(proj, gram.ce, gram.cy, full)
-        residual = apply_model(data, index, forms, beta, full)
+        _, theta = log_evidence(proj, np.arange(zero.size, dtype=np.intp), mean, sd)
+        beta = _beta(proj, gram.ce, gram.cy, theta)
+        residual = apply_model(data, index, firsts, beta, theta)
         out.append(fit_noise(residual, starts, max_order=max_order))
     return out, beta_ls
 
@@ -199,7 +209,12 @@ def _best_forms(aug: Augmented, forms: Sequence[Form]) -> list[Form]:
     """Per effect, the form of greatest evidence alone (its choice paid for by ``n_forms``)."""
     best: dict[str, tuple[float, Form]] = {}
     for f in forms:
-        ev = form_evidence(aug, f)
+        try:
+            ev = form_evidence(aug, f)
+        except np.linalg.LinAlgError:  # non-finite columns
+            ev = -np.inf
+        if not np.isfinite(ev):
+            ev = -np.inf
         if f.effect not in best or ev > best[f.effect][0]:
             best[f.effect] = (ev, f)
     return [best[e][1] for e in dict.fromkeys(f.effect for f in forms)]

@@ -17,6 +17,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg.blas import dsyrk
 
 from orbitcal.arrays import FloatArray
 from orbitcal.diagnose.data import FIELD_SCALE_NT, DiagnosisData
@@ -182,7 +183,9 @@ def whitened_grams(
                 w = w[keep][valid[keep]]
                 n_rows[k] += w.shape[0]
                 log_scale[k] += w.shape[0] * float(np.log(noise[i].sigma_nt))
-                fulls[k][np.ix_(ix, ix)] += w.T @ w
+                # the upper triangle of w'w (a rank-k update: half the products of w.T @ w)
+                fulls[k][np.ix_(ix, ix)] += dsyrk(1.0, w.T)
+    fulls = [np.triu(f) + np.triu(f, 1).T for f in fulls]
     c, e = slice(0, 12), slice(12, 12 + width)
     return [
         Gram(
