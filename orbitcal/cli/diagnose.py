@@ -1,7 +1,8 @@
 """``orbitcal diagnose``: where the sim-to-real gap lies and which unmodelled effect causes it.
 
 ``orbitcal diagnose TELEMETRY --tle TLE --out REPORT.json [--html REPORT.html]
-[--attitude-frame GCRS|ITRS] [--time-scale UTC|TAI|GPS] [--field NAME] [--calibration CAL.json]``
+[--attitude-frame GCRS|ITRS] [--time-scale UTC|TAI|GPS] [--field NAME] [--calibration CAL.json]
+[--engine rules|model]``
 writes the CONTRACT section-5 report (and optionally a self-contained HTML page with plots).
 ``--calibration`` takes the calibration in service as a prior on the 12 parameters.
 """
@@ -65,6 +66,14 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         default=_DEFAULTS.seed,
         help=f"seed of the learned model (default {_DEFAULTS.seed})",
     )
+    p.add_argument(
+        "--engine",
+        choices=("rules", "model"),
+        default=_DEFAULTS.model.engine,
+        help="which engine makes the verdict: the held-out rules or the model core "
+        "(probabilities and the confirmation come from the model core under both; "
+        f"default {_DEFAULTS.model.engine})",
+    )
     p.set_defaults(func=run)
 
 
@@ -72,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``orbitcal diagnose``; bad input raises CliError or an OrbitcalError (exit != 0)."""
     from orbitcal.diagnose.api import diagnose
     from orbitcal.diagnose.html_report import report_html
-    from orbitcal.diagnose.options import DiagnosisOptions
+    from orbitcal.diagnose.options import DiagnosisOptions, ModelOptions
     from orbitcal.field import get_field
     from orbitcal.memory import release_freed_arrays, trim_heap
 
@@ -84,6 +93,7 @@ def run(args: argparse.Namespace) -> int:
         prior_sigma_matrix=args.prior_sigma_matrix,
         prior_sigma_offset_nt=args.prior_sigma_offset,
         seed=args.seed,
+        model=ModelOptions(engine=args.engine),
     )
     tel = load_table(
         args,

@@ -191,7 +191,25 @@ def _run(
     final_att = reviewed(data, att, rv)
     document["evidence"] = evidence(data, final_att)  # curves the HTML page draws (evidence.py)
     document = review_report(document, data, att, chosen=chosen, rv=rv)
+    document = _with_model(document, data, options, fit_mask)
     return Diagnosis(report=Report.from_json(document), attribution=final_att, data=data)
+
+
+def _with_model(
+    document: dict[str, Any],
+    data: DiagnosisData,
+    options: DiagnosisOptions,
+    fit_mask: BoolArray | None,
+) -> dict[str, Any]:
+    """The model core (:mod:`orbitcal.diagnose.model`) on the same training span and final
+    block: the report's ``probability``, ``verdict_probability``, ``confirmation`` and ``model``
+    keys (and, under ``options.model.engine == "model"``, its verdict)."""
+    from orbitcal.diagnose.attribution.engine import training_split
+    from orbitcal.diagnose.model import model_diagnosis, with_model_keys
+
+    train, holdout = training_split(data, options.attribution, fit_mask)
+    md = model_diagnosis(data, train, holdout, options.model)
+    return with_model_keys(document, md, options.model)
 
 
 def _learned_summary(

@@ -22,7 +22,9 @@ one the simulator uses.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import importlib
+import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -158,8 +160,21 @@ class Effect:
         return self.build_beside is not None
 
     def design(self, data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
-        """Its design block on ``data`` (None when the witness is missing), marked as its own."""
-        return _owned(self.build(data, train), self.name)
+        """Its design block on ``data`` (None when the witness is missing), marked as its own.
+
+        Kept for the next call with the same data object and training samples: the rules
+        engine and the model core (:mod:`orbitcal.diagnose.model`) ask for the same blocks, and
+        a scan (the attitude error's periods) takes seconds on a day at 1 Hz."""
+        key = (self.name, hashlib.blake2b(np.packbits(train).tobytes(), digest_size=16).digest())
+        ref, held = _DESIGNS.get(id(data), (None, {}))
+        if ref is None or ref() is not data:
+            held = {}
+            _DESIGNS[id(data)] = (weakref.ref(data), held)
+            for stale in [k for k, (r, _) in _DESIGNS.items() if r() is None]:
+                del _DESIGNS[stale]
+        if key not in held:
+            held[key] = _owned(self.build(data, train), self.name)
+        return held[key]
 
     def design_beside(
         self, data: DiagnosisData, train: BoolArray, fixed: Sequence[DesignBlock]
@@ -182,6 +197,11 @@ class Effect:
     def inconsistencies(self, names: list[str], values: list[float], sds: list[float]) -> list[str]:
         """Why fitted values of its parameters contradict each other (:attr:`consistency`)."""
         return [] if self.consistency is None else self.consistency(names, values, sds)
+
+
+#: Design blocks per data object (by id, with a weak reference that tells a reused id): per
+#: (effect, training samples), the block or None (:meth:`Effect.design`).
+_DESIGNS: dict[int, tuple[Any, dict[tuple[str, bytes], DesignBlock | None]]] = {}
 
 
 def _owned(block: DesignBlock | None, effect: str) -> DesignBlock | None:

@@ -18,11 +18,17 @@ from orbitcal.diagnose.prior import DEFAULT_SIGMA_MATRIX, DEFAULT_SIGMA_OFFSET_N
 __all__ = [
     "DEFAULT_CRUST_MODEL",
     "DEFAULT_WORKERS",
+    "ENGINES",
     "HOLDOUT_BLOCKS",
     "N_BLOCKS",
     "AttributionOptions",
     "DiagnosisOptions",
+    "ModelOptions",
 ]
+
+#: The verdict-makers: ``"rules"`` the held-out attribution and its review, ``"model"`` the
+#: model core (:mod:`orbitcal.diagnose.model`).
+ENGINES = ("rules", "model")
 
 #: Equal-duration time blocks of a diagnosis, and how many of the latest are held out.
 N_BLOCKS = 10
@@ -86,6 +92,46 @@ class AttributionOptions:
 
 
 @dataclass(frozen=True)
+class ModelOptions:
+    """The model core's settings (:mod:`orbitcal.diagnose.model`, ``docs/design.md``): all of
+    them, fixed before any validation world was drawn.
+
+    Attributes
+    ----------
+    engine : {"rules", "model"}
+        Which engine makes the verdict. The report's ``probability``, ``verdict_probability``
+        and ``confirmation`` come from the model core under both.
+    expected_effects : float
+        Prior expected number of effects present; each of the catalogue's K effects is present
+        with probability ``expected_effects / K``.
+    max_effects : int
+        Largest model enumerated (every model of at most this many effects).
+    noise_max_order : int
+        Largest autoregressive order of the per-axis noise model.
+    prior_sd_fraction : float
+        Prior standard deviation of a parameter without a stated Gaussian prior, as a fraction
+        of its range's half-width.
+    selection_probability : float
+        Inclusion probability from which an effect is in the chosen model (0.5: the median
+        probability model) and is named.
+    confirmation_level : float
+        Level of the one-sided confirmation test on the final block.
+    """
+
+    engine: str = "rules"
+    expected_effects: float = 1.0
+    max_effects: int = 3
+    noise_max_order: int = 4
+    prior_sd_fraction: float = 1.0 / 3.0
+    selection_probability: float = 0.5
+    confirmation_level: float = 0.05
+
+    def __post_init__(self) -> None:
+        if self.engine not in ENGINES:
+            raise ValueError(f"engine {self.engine!r}: one of {', '.join(ENGINES)}")
+
+
+@dataclass(frozen=True)
 class DiagnosisOptions:
     """Everything a diagnosis is asked with, besides the telemetry, the orbit and the prior.
 
@@ -113,6 +159,8 @@ class DiagnosisOptions:
         :mod:`orbitcal.blas`).
     attribution : AttributionOptions
         The held-out attribution's settings.
+    model : ModelOptions
+        The model core's settings, and which engine makes the verdict.
     """
 
     field: str = "IGRF-14"
@@ -125,3 +173,4 @@ class DiagnosisOptions:
     seed: int = 0
     one_blas_thread: bool = True
     attribution: AttributionOptions = dataclasses.field(default_factory=AttributionOptions)
+    model: ModelOptions = dataclasses.field(default_factory=ModelOptions)

@@ -1,0 +1,107 @@
+"""One confirmation of the chosen model on a final block of time no selection step saw.
+
+The chosen model (fitted on the training span) and the calibration alone (fitted there too) both
+forecast the final block; their errors are whitened by the training span's noise model and
+compared sample by sample with the Clark & West (2007) adjusted loss difference of nested
+models,
+
+    d_t = sum_axes [ w_base^2 - (w_model^2 - (w_base - w_model)^2) ],
+
+whose mean is tested one-sided (H1: the model forecasts better) with a Newey & West (1987)
+variance (Bartlett kernel, bandwidth ``floor(4 (T / 100)^(2/9))``) so that what autocorrelation
+whitening leaves does not make the test liberal (Diebold & Mariano 1995). The block's RMS before
+and after are the contract's ``holdout_rms_*_nt`` (per component).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from orbitcal.arrays import FloatArray
+from orbitcal.diagnose.model.noise_model import AxisNoise
+
+__all__ = ["Confirmation", "confirm", "newey_west_variance"]
+
+
+@dataclass(frozen=True)
+class Confirmation:
+    """The chosen model against the calibration alone on the final block.
+
+    Attributes
+    ----------
+    holdout_rms_before_nt, holdout_rms_after_nt : float
+        RMS over samples and components of the calibration's and the model's errors [nT].
+    p_value : float
+        One-sided p-value of the model forecasting better (1.0 for the calibration alone).
+    statistic : float
+        The test's z statistic.
+    n_samples : int
+        Samples of the final block.
+    """
+
+    holdout_rms_before_nt: float
+    holdout_rms_after_nt: float
+    p_value: float
+    statistic: float
+    n_samples: int
+
+    def to_json(self) -> dict[str, float | int]:
+        """The contract's ``confirmation`` with the test's statistic and sample count."""
+        return {
+            "holdout_rms_before_nt": round(self.holdout_rms_before_nt, 4),
+            "holdout_rms_after_nt": round(self.holdout_rms_after_nt, 4),
+            "p_value": float(f"{self.p_value:.4g}"),
+            "statistic": round(self.statistic, 4),
+            "n_samples": self.n_samples,
+        }
+
+
+def newey_west_variance(d: FloatArray, bandwidth: int | None = None) -> float:
+    """Long-run variance of the series ``d`` (Bartlett weights); bandwidth by the usual rule."""
+    d = np.asarray(d, dtype=float) - float(np.mean(d))
+    t = d.size
+    lags = int(4 * (t / 100.0) ** (2.0 / 9.0)) if bandwidth is None else bandwidth
+    var = float(d @ d) / t
+    for k in range(1, min(lags, t - 1) + 1):
+        var += 2.0 * (1.0 - k / (lags + 1.0)) * float(d[k:] @ d[:-k]) / t
+    return max(var, 0.0)
+
+
+def _whitened(e: FloatArray, noise: Sequence[AxisNoise], run_start: np.ndarray) -> FloatArray:
+    out = np.zeros_like(e)
+    valid = np.ones(e.shape[0], dtype=bool)
+    for i, nz in enumerate(noise):
+        out[:, i], ok = nz.whiten(e[:, i], run_start)
+        valid &= ok
+    return out[valid]
+
+
+def confirm(
+    e_base_nt: FloatArray,
+    e_model_nt: FloatArray,
+    noise: Sequence[AxisNoise],
+    run_start: np.ndarray,
+) -> Confirmation:
+    """The confirmation from the forecast errors of the calibration alone and of the chosen
+    model on the final block, (m, 3) each [nT] (identical arrays: the model is the calibration).
+    """
+    before = float(np.sqrt(np.mean(e_base_nt**2)))
+    after = float(np.sqrt(np.mean(e_model_nt**2)))
+    n = int(e_base_nt.shape[0])
+    if np.array_equal(e_base_nt, e_model_nt):
+        return Confirmation(before, after, 1.0, 0.0, n)
+    wb = _whitened(e_base_nt, noise, run_start)
+    wm = _whitened(e_model_nt, noise, run_start)
+    d = np.sum(wb**2 - (wm**2 - (wb - wm) ** 2), axis=1)
+    if d.size < 3:
+        return Confirmation(before, after, 1.0, 0.0, n)
+    var = newey_west_variance(d)
+    se = math.sqrt(var / d.size) if var > 0.0 else 0.0
+    mean = float(np.mean(d))
+    z = mean / se if se > 0.0 else (math.inf if mean > 0.0 else 0.0)
+    p = 0.5 * math.erfc(z / math.sqrt(2.0)) if math.isfinite(z) else 0.0
+    return Confirmation(before, after, float(p), float(z) if math.isfinite(z) else 1e9, n)

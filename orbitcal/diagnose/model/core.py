@@ -1,0 +1,333 @@
+"""The model core's driver: noise model, one whitened Gram matrix, the posterior over models,
+one confirmation (``docs/design.md``, "The model core").
+
+::
+
+    training span ──encompassing fit──> residual ──> noise model per axis (BIC)
+                  ──whitened Gram──> evidence of every model of <= 3 effects ──> posterior
+    chosen model (inclusion >= cut-off), fitted on the training span
+    final block (never seen above) ──> confirmation (Clark-West, Newey-West variance)
+
+The driver names no effect: the catalogue gives each candidate's columns and prior.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from orbitcal.arrays import BoolArray, FloatArray
+from orbitcal.diagnose.blocked import estimation_samples
+from orbitcal.diagnose.data import DiagnosisData
+from orbitcal.diagnose.design import DesignBlock
+from orbitcal.diagnose.effects import CATALOGUE, Effect
+from orbitcal.diagnose.model.confirm import Confirmation, confirm
+from orbitcal.diagnose.model.evidence import (
+    Augmented,
+    Posterior,
+    Projected,
+    augment,
+    averaged,
+    form_evidence,
+    log_evidence,
+    posterior,
+    project,
+)
+from orbitcal.diagnose.model.gram import (
+    Form,
+    Gram,
+    apply_model,
+    group_prior,
+    whitened_gram,
+    whitened_grams,
+)
+from orbitcal.diagnose.model.noise_model import AxisNoise, fit_noise, noise_skip
+from orbitcal.diagnose.options import ModelOptions
+
+__all__ = ["ModelDiagnosis", "candidate_forms", "model_diagnosis", "run_starts"]
+
+IntArray = np.ndarray
+
+#: A noise model of unit white noise (the first, encompassing fit's).
+_UNIT = AxisNoise("ar", np.zeros(0), 1.0, float("nan"))
+
+
+@dataclass(frozen=True)
+class ModelDiagnosis:
+    """What the model core found.
+
+    Attributes
+    ----------
+    posterior : Posterior
+        Over every model of at most ``max_effects`` candidates.
+    chosen : tuple of str
+        The effects of inclusion probability at least the options' cut-off, most probable first.
+    confirmation : Confirmation
+        The chosen model against the calibration alone on the final block.
+    noise : tuple of AxisNoise
+        The noise model per sensor axis.
+    absorbed : dict of str to float
+        Per candidate, the share of its prior's field the calibration's 12 parameters reproduce.
+    params : dict of str to dict
+        Per candidate, its parameters' posterior mean (in the chosen model, else alone).
+    forms : dict of str to str
+        Per candidate, the form its evidence preferred (its design block's ``variant``).
+    noise_weights : tuple of float
+        Posterior weights of the noise models tried (of the calibration's residual, of the
+        encompassing model's); ``noise`` is the heavier.
+    """
+
+    posterior: Posterior
+    chosen: tuple[str, ...]
+    confirmation: Confirmation
+    noise: tuple[AxisNoise, ...]
+    absorbed: dict[str, float] = field(default_factory=dict)
+    params: dict[str, dict[str, float]] = field(default_factory=dict)
+    forms: dict[str, str] = field(default_factory=dict)
+    noise_weights: tuple[float, ...] = ()
+
+    def inclusion(self) -> dict[str, float]:
+        """Posterior inclusion probability per candidate."""
+        return self.posterior.inclusion()
+
+    def probability(self, effect: str) -> float:
+        """Posterior probability that ``effect`` is present (0 for a candidate without witness
+        in the data, and for ``"none"`` the probability that no effect is)."""
+        if effect == "none":
+            return self.posterior.none()
+        return self.inclusion().get(effect, 0.0)
+
+
+def run_starts(data: DiagnosisData, index: IntArray, step: int) -> IntArray:
+    """Per position of ``index``, where its run begins: consecutive samples ``step`` apart, no
+    time gap over three median steps."""
+    index = np.asarray(index)
+    if index.size == 0:
+        return np.zeros(0, dtype=np.intp)
+    t = data.t_utc_s[index]
+    dt = np.diff(t)
+    gap = dt > 3.0 * float(np.median(dt)) if dt.size else np.zeros(0, dtype=bool)
+    new = np.r_[True, (np.diff(index) != step) | gap]
+    starts = np.flatnonzero(new)
+    return np.asarray(starts[np.cumsum(new) - 1], dtype=np.intp)
+
+
+def _fill_sd(block: DesignBlock, sd: FloatArray, data: DiagnosisData) -> FloatArray:
+    """Prior widths without a finite range: the width that makes the column's field 100 nT."""
+    if np.all(np.isfinite(sd)):
+        return sd
+    from orbitcal.diagnose.model.gram import UNBOUNDED_FIELD_NT
+
+    g = block.rows(slice(0, data.n, max(1, data.n // 2000)))
+    rms = np.sqrt(np.mean(g**2, axis=(0, 1)))
+    return np.where(np.isfinite(sd), sd, UNBOUNDED_FIELD_NT / np.maximum(rms, 1e-12))
+
+
+def candidate_forms(
+    data: DiagnosisData,
+    train: BoolArray,
+    options: ModelOptions,
+    catalogue: Sequence[Effect] = CATALOGUE,
+) -> list[Form]:
+    """Every form of every candidate whose witness is in the data, with its columns and prior."""
+    forms: list[Form] = []
+    col = 0
+    for eff in catalogue:
+        block = eff.design(data, train)
+        if block is None:
+            continue
+        if not block.all_finite():  # as the rules engine asks; a form with non-finite
+            continue  # columns among the alternatives loses the choice (_best_forms)
+        blocks = [block, *block.alternatives]
+        for b in blocks:
+            mean, sd = group_prior(b, options.prior_sd_fraction)
+            sd = _fill_sd(b, sd, data)
+            forms.append(Form(eff.name, b, slice(col, col + b.width), mean, sd, len(blocks)))
+            col += b.width
+    return forms
+
+
+def _theta_full(forms: Sequence[Form], chosen: Sequence[Form], theta: FloatArray) -> FloatArray:
+    """The model's parameters placed in the Gram's effect columns (zero elsewhere)."""
+    width = max((f.cols.stop for f in forms), default=0)
+    out = np.zeros(width)
+    k = 0
+    for f in chosen:
+        out[f.cols] = theta[k : k + f.block.width]
+        k += f.block.width
+    return out
+
+
+def _beta(
+    proj: Projected, gram_ce: FloatArray, gram_cy: FloatArray, theta: FloatArray
+) -> FloatArray:
+    """The calibration's parameters given the effects' (generalised least squares)."""
+    return np.asarray(proj.cc_pinv @ (gram_cy - gram_ce @ theta))
+
+
+#: Prior standard deviation of each calibration coefficient around its least-squares value [nT]
+#: (a matrix element times FIELD_SCALE_NT, or an offset): 5 % of the field, wide enough that
+#: it decides nothing the data tell; proper, so that noise models compare (``evidence``).
+CAL_PRIOR_SD_NT = 2500.0
+
+
+def _compact(forms: Sequence[Form]) -> list[Form]:
+    """``forms`` with their columns renumbered side by side (a Gram matrix of these alone)."""
+    out, col = [], 0
+    for f in forms:
+        out.append(dataclasses.replace(f, cols=slice(col, col + f.block.width)))
+        col += f.block.width
+    return out
+
+
+def _noise_candidates(
+    data: DiagnosisData, index: IntArray, starts: IntArray, forms: Sequence[Form], max_order: int
+) -> tuple[list[tuple[AxisNoise, ...]], FloatArray]:
+    """Two noise models of the training residual -- of the calibration alone, and of the
+    encompassing model (every candidate's first form at its posterior mean under unit noise:
+    what no candidate explains) -- and the calibration's least-squares value."""
+    firsts = _compact([f for i, f in enumerate(forms) if i == 0 or forms[i - 1].effect != f.effect])
+    gram = whitened_gram(data, index, starts, firsts, (_UNIT,) * 3)
+    proj = project(gram)
+    zero = np.zeros(max((f.cols.stop for f in firsts), default=0))
+    beta_ls = _beta(proj, gram.ce, gram.cy, zero)
+    out = [fit_noise(apply_model(data, index, firsts, beta_ls, zero), starts, max_order=max_order)]
+    if firsts:
+        mean = np.concatenate([f.prior_mean for f in firsts])
+        sd = np.concatenate([f.prior_sd for f in firsts])
+        _, theta = log_evidence(proj, np.arange(zero.size, dtype=np.intp), mean, sd)
+        beta = _beta(proj, gram.ce, gram.cy, theta)
+        residual = apply_model(data, index, firsts, beta, theta)
+        out.append(fit_noise(residual, starts, max_order=max_order))
+    return out, beta_ls
+
+
+def _best_forms(aug: Augmented, forms: Sequence[Form]) -> list[Form]:
+    """Per effect, the form of greatest evidence alone (its choice paid for by ``n_forms``)."""
+    best: dict[str, tuple[float, Form]] = {}
+    for f in forms:
+        try:
+            ev = form_evidence(aug, f)
+        except np.linalg.LinAlgError:  # non-finite columns
+            ev = -np.inf
+        if not np.isfinite(ev):
+            ev = -np.inf
+        if f.effect not in best or ev > best[f.effect][0]:
+            best[f.effect] = (ev, f)
+    return [best[e][1] for e in dict.fromkeys(f.effect for f in forms)]
+
+
+def _absorbed(proj: Projected, forms: Sequence[Form]) -> dict[str, float]:
+    """Share of each form's prior-scaled column energy the calibration's columns take."""
+    out = {}
+    for f in forms:
+        ix = np.arange(f.cols.start, f.cols.stop)
+        s2 = f.prior_sd**2
+        raw = float(np.sum(s2 * proj.g_raw_diag[ix]))
+        kept = float(np.sum(s2 * np.diag(proj.g)[ix]))
+        out[f.effect] = float(np.clip(1.0 - kept / raw, 0.0, 1.0)) if raw > 0.0 else 1.0
+    return out
+
+
+@dataclass(frozen=True)
+class _Fitted:
+    """The posterior under one noise model."""
+
+    noise: tuple[AxisNoise, ...]
+    gram: Gram
+    best: list[Form]
+    post: Posterior
+
+
+def _under(
+    forms: Sequence[Form],
+    gram: Gram,
+    noise: tuple[AxisNoise, ...],
+    cal_mean: FloatArray,
+    options: ModelOptions,
+) -> _Fitted:
+    """The posterior under one noise model, from its Gram matrix."""
+    aug = augment(gram, cal_mean, np.full(12, CAL_PRIOR_SD_NT), gram.log_scale)
+    best = _best_forms(aug, forms)
+    post = posterior(
+        aug,
+        best,
+        expected_effects=options.expected_effects,
+        max_effects=options.max_effects,
+        n_catalogue=len(CATALOGUE),
+    )
+    return _Fitted(noise, gram, best, post)
+
+
+def model_diagnosis(
+    data: DiagnosisData,
+    train: BoolArray,
+    holdout: BoolArray,
+    options: ModelOptions = ModelOptions(),
+    forms: Sequence[Form] | None = None,
+    confirm_model: Sequence[str] | None = None,
+) -> ModelDiagnosis:
+    """The model core on ``data``: selection on ``train`` only, one confirmation on ``holdout``.
+
+    ``forms`` (from :func:`candidate_forms` on the same data and training span) may be given
+    to reuse the design between calls on the same world. ``confirm_model`` (candidates' names,
+    at most ``max_effects``) confirms that model instead of the chosen one: for measuring the
+    confirmation's size on null worlds (``benchmarks/diagnose_model.py``).
+    """
+    forms = list(candidate_forms(data, train, options) if forms is None else forms)
+    index = estimation_samples(train)
+    step = int(np.median(np.diff(index))) if index.size > 1 else 1
+    starts = run_starts(data, index, step)
+    noises, cal_mean = _noise_candidates(data, index, starts, forms, options.noise_max_order)
+    skip = noise_skip(options.noise_max_order)
+    grams = whitened_grams(data, index, starts, forms, noises, skip=skip)
+    fits = [_under(forms, g, n, cal_mean, options) for g, n in zip(grams, noises, strict=True)]
+    post, weights = averaged([f.post for f in fits])
+    fit = fits[int(np.argmax(weights))]
+    chosen = post.median_model(options.selection_probability)
+    if confirm_model is not None:
+        chosen = tuple(confirm_model)
+    by_effect = {f.effect: f for f in fit.best}
+    model_key = tuple(sorted(post.effects.index(e) for e in chosen))
+    params = post.thetas[post.models.index(model_key)]
+    chosen_forms = [by_effect[e] for e in sorted(chosen, key=post.effects.index)]
+    full = _theta_full(forms, chosen_forms, params[12:])
+    h_index = np.flatnonzero(holdout)
+    h_starts = run_starts(data, h_index, 1)
+    e_model = apply_model(data, h_index, forms, params[:12], full)
+    e_base = (
+        apply_model(data, h_index, forms, post.thetas[0][:12], np.zeros_like(full))
+        if chosen
+        else e_model
+    )
+    return ModelDiagnosis(
+        posterior=post,
+        chosen=chosen,
+        # whitened by the null's noise model (the calibration's residual): the test's size is
+        # about the calibration alone being right, whatever noise model the selection preferred
+        confirmation=confirm(e_base, e_model, fits[0].noise, h_starts),
+        noise=fit.noise,
+        absorbed=_absorbed(project(fit.gram), fit.best),
+        params=_params(post, fit.best, chosen_forms, params[12:]),
+        forms={f.effect: f.block.variant for f in fit.best},
+        noise_weights=tuple(float(w) for w in weights),
+    )
+
+
+def _params(
+    post: Posterior, best: Sequence[Form], chosen: Sequence[Form], theta: FloatArray
+) -> dict[str, dict[str, float]]:
+    """Posterior means: in the chosen model for its effects, alone for the others."""
+    out: dict[str, dict[str, float]] = {}
+    k = 0
+    for f in chosen:
+        out[f.effect] = dict(zip(f.block.names, theta[k : k + f.block.width].tolist(), strict=True))
+        k += f.block.width
+    for i, f in enumerate(best):
+        if f.effect not in out:
+            alone = post.thetas[post.models.index((i,))][12:]
+            out[f.effect] = dict(zip(f.block.names, alone.tolist(), strict=True))
+    return out

@@ -1,0 +1,224 @@
+"""The model core's columns and their one whitened Gram matrix.
+
+Every candidate effect is a *group* of columns (its design block, :mod:`orbitcal.diagnose.design`)
+with a Gaussian prior on its parameters taken from the catalogue's ranges (:func:`group_prior`).
+The 12 calibration parameters are the columns ``b_ref / FIELD_SCALE_NT`` and ``1`` of each sensor
+axis. With a noise model per axis (:mod:`orbitcal.diagnose.model.noise_model`), the design and the
+measurement are whitened axis by axis along time and their cross-products summed into one Gram
+matrix ``[X_cal | X_effects | y]' [X_cal | X_effects | y]`` a block of samples at a time (the
+rows are never held whole), from which every model's evidence follows
+(:mod:`orbitcal.diagnose.model.evidence`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg.blas import dsyrk
+
+from orbitcal.arrays import FloatArray
+from orbitcal.diagnose.data import FIELD_SCALE_NT, DiagnosisData
+from orbitcal.diagnose.design import DesignBlock
+from orbitcal.diagnose.effects import block_ranges
+from orbitcal.diagnose.model.noise_model import AxisNoise
+
+__all__ = [
+    "CHUNK_SAMPLES",
+    "Form",
+    "Gram",
+    "apply_model",
+    "group_prior",
+    "whitened_gram",
+    "whitened_grams",
+]
+
+IntArray = np.ndarray
+
+#: Samples whose rows are built at once.
+CHUNK_SAMPLES = 2048
+
+#: A parameter without a finite range gets the prior width that makes its column's field this
+#: large [nT] (none of the catalogue's parameters is without one).
+UNBOUNDED_FIELD_NT = 100.0
+
+
+@dataclass(frozen=True)
+class Form:
+    """One form of one effect: its block, where its columns sit, and its prior.
+
+    Attributes
+    ----------
+    effect : str
+        The catalogue effect.
+    block : DesignBlock
+        Its regressors.
+    cols : slice
+        Its columns among the effect columns of the Gram matrix.
+    prior_mean, prior_sd : ndarray, shape (p,)
+        The Gaussian prior of its parameters, in their units.
+    n_forms : int
+        How many forms its effect offered (the choice among them is paid for, ``evidence``).
+    """
+
+    effect: str
+    block: DesignBlock
+    cols: slice
+    prior_mean: FloatArray
+    prior_sd: FloatArray
+    n_forms: int
+
+
+def group_prior(block: DesignBlock, sd_fraction: float) -> tuple[FloatArray, FloatArray]:
+    """The Gaussian prior of a block's parameters from its effect's ranges.
+
+    A range with a stated Gaussian prior (a published model's amplitude near 1) gives it;
+    otherwise the prior is centred on zero (no effect) when zero is in the range, else on the
+    range's middle, with a standard deviation of ``sd_fraction`` times the largest distance
+    from that centre to a bound (1/3: the range is three standard deviations).
+    """
+    means, sds = [], []
+    for rng in block_ranges(block):
+        if rng.prior_sd is not None:
+            means.append(float(rng.prior_mean or 0.0))
+            sds.append(float(rng.prior_sd))
+            continue
+        lo, hi = float(rng.lower), float(rng.upper)
+        centre = 0.0 if lo <= 0.0 <= hi else 0.5 * (lo + hi)
+        half = max(abs(hi - centre), abs(centre - lo))
+        means.append(centre if math.isfinite(centre) else 0.0)
+        sds.append(sd_fraction * half if math.isfinite(half) else math.nan)
+    return np.array(means), np.array(sds)
+
+
+@dataclass
+class Gram:
+    """The whitened cross-products of one data set.
+
+    Attributes
+    ----------
+    cc, ce, cy : ndarray
+        Calibration columns (12) against themselves, the effect columns and the data.
+    ee, ey : ndarray
+        Effect columns against themselves and the data.
+    yy : float
+        The data's square norm.
+    n_rows : int
+        Whitened rows summed (three per sample, less each run's first).
+    log_scale : float
+        Sum over those rows of ``log sigma`` of their axis's noise model.
+    """
+
+    cc: FloatArray
+    ce: FloatArray
+    cy: FloatArray
+    ee: FloatArray
+    ey: FloatArray
+    yy: float
+    n_rows: int
+    log_scale: float = 0.0
+
+
+def _rows(
+    data: DiagnosisData, part: IntArray, forms: Sequence[Form], width: int
+) -> tuple[FloatArray, FloatArray]:
+    """Calibration rows (m, 4) and effect rows (m, 3, width) of the samples ``part``."""
+    b = data.b_ref_body_nt[part] / FIELD_SCALE_NT
+    cal = np.column_stack([b, np.ones(part.size)])
+    eff = np.zeros((part.size, 3, width))
+    for f in forms:
+        eff[:, :, f.cols] = f.block.rows(part)
+    return cal, eff
+
+
+def _chunks(m: int, lag: int) -> list[tuple[int, int, int]]:
+    """``(lo, a, b)``: rows ``lo .. b`` are built, rows ``a .. b`` kept (``lo = a - lag``)."""
+    return [(max(0, a - lag), a, min(a + CHUNK_SAMPLES, m)) for a in range(0, m, CHUNK_SAMPLES)]
+
+
+def whitened_gram(
+    data: DiagnosisData,
+    index: IntArray,
+    run_start: IntArray,
+    forms: Sequence[Form],
+    noise: Sequence[AxisNoise],
+    skip: int = 0,
+) -> Gram:
+    """The Gram matrix of the whitened calibration columns, effect columns and measurement over
+    the samples ``index`` (runs ``run_start``, positions in ``index``). Each run's first
+    ``max(skip, lag)`` samples are left out (``skip`` the same for every noise model: their
+    likelihoods are then of the same rows)."""
+    return whitened_grams(data, index, run_start, forms, [noise], skip)[0]
+
+
+def whitened_grams(
+    data: DiagnosisData,
+    index: IntArray,
+    run_start: IntArray,
+    forms: Sequence[Form],
+    noises: Sequence[Sequence[AxisNoise]],
+    skip: int = 0,
+) -> list[Gram]:
+    """:func:`whitened_gram` under each of several noise models, the rows built once."""
+    width = max((f.cols.stop for f in forms), default=0)
+    fulls = [np.zeros((12 + width + 1, 12 + width + 1)) for _ in noises]
+    n_rows = [0] * len(noises)
+    log_scale = [0.0] * len(noises)
+    lag = max(skip, *(n.lag for noise in noises for n in noise))
+    for lo, a, b in _chunks(index.size, lag):
+        part = index[lo:b]
+        cal, eff = _rows(data, part, forms, width)
+        y = data.b_raw_nt[part]
+        # run starts before the chunk are negative: the kept rows' history is inside it
+        starts = run_start[lo:b] - lo
+        keep = slice(a - lo, b - lo)
+        for i in range(3):
+            z = np.concatenate([cal, eff[:, i, :], y[:, i : i + 1]], axis=1)
+            ix = np.r_[4 * i : 4 * i + 4, 12 : 12 + width + 1]
+            for k, noise in enumerate(noises):
+                w, valid = noise[i].whiten(z, starts)
+                valid &= (np.arange(part.size) - starts) >= skip
+                w = w[keep][valid[keep]]
+                n_rows[k] += w.shape[0]
+                log_scale[k] += w.shape[0] * float(np.log(noise[i].sigma_nt))
+                # the upper triangle of w'w (a rank-k update: half the products of w.T @ w)
+                fulls[k][np.ix_(ix, ix)] += dsyrk(1.0, w.T)
+    fulls = [np.triu(f) + np.triu(f, 1).T for f in fulls]
+    c, e = slice(0, 12), slice(12, 12 + width)
+    return [
+        Gram(
+            cc=full[c, c],
+            ce=full[c, e],
+            cy=full[c, -1],
+            ee=full[e, e],
+            ey=full[e, -1],
+            yy=float(full[-1, -1]),
+            n_rows=n,
+            log_scale=ls,
+        )
+        for full, n, ls in zip(fulls, n_rows, log_scale, strict=True)
+    ]
+
+
+def apply_model(
+    data: DiagnosisData,
+    index: IntArray,
+    forms: Sequence[Form],
+    beta: FloatArray,
+    theta: FloatArray,
+) -> FloatArray:
+    """``b_raw - (calibration + effects)`` at the samples ``index`` [nT], (m, 3): ``beta`` the 12
+    calibration parameters (axis ``i``: its row of the matrix / FIELD_SCALE_NT, then its offset),
+    ``theta`` the effect parameters (zero for the forms not in the model)."""
+    used = [f for f in forms if np.any(theta[f.cols] != 0.0)]
+    width = max((f.cols.stop for f in forms), default=0)
+    out = np.empty((index.size, 3))
+    for a in range(0, index.size, CHUNK_SAMPLES):
+        part = index[a : a + CHUNK_SAMPLES]
+        cal, eff = _rows(data, part, used, width)  # the forms of the model only
+        for i in range(3):
+            pred = cal @ beta[4 * i : 4 * i + 4] + eff[:, i, :] @ theta[:width]
+            out[a : a + part.size, i] = data.b_raw_nt[part, i] - pred
+    return out

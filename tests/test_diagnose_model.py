@@ -1,0 +1,233 @@
+"""The model core of the diagnosis (orbitcal.diagnose.model): noise model, exact evidence,
+posterior, the confirmation's separation from selection, and the contract keys it writes."""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_diagnose_worlds import make_world
+
+from orbitcal.diagnose.attribution.engine import training_split
+from orbitcal.diagnose.model import candidate_forms, model_diagnosis
+from orbitcal.diagnose.model.confirm import newey_west_variance
+from orbitcal.diagnose.model.evidence import augment, log_evidence, posterior, project
+from orbitcal.diagnose.model.gram import Form, Gram
+from orbitcal.diagnose.model.noise_model import fit_axis_noise, runs_of_index
+from orbitcal.diagnose.options import ModelOptions
+
+pytestmark = pytest.mark.usefixtures("single_thread_blas")
+
+
+def _ar1(n: int, phi: float, rng: np.random.Generator) -> np.ndarray:
+    e = rng.normal(size=n)
+    x = np.zeros(n)
+    for t in range(1, n):
+        x[t] = phi * x[t - 1] + e[t]
+    return x
+
+
+def test_noise_model_recovers_an_ar1_coefficient() -> None:
+    rng = np.random.default_rng(0)
+    r = _ar1(20_000, 0.7, rng)
+    nz = fit_axis_noise(r, runs_of_index(np.arange(r.size)), max_order=4)
+    assert nz.kind == "ar" and nz.phi.size >= 1
+    assert nz.phi[0] == pytest.approx(0.7, abs=0.03)
+    assert nz.sigma_nt == pytest.approx(1.0, rel=0.03)
+
+
+def test_noise_model_takes_a_random_walk_offset_and_white_noise_as_white() -> None:
+    rng = np.random.default_rng(1)
+    walk = np.cumsum(rng.normal(scale=0.3, size=20_000)) + rng.normal(size=20_000)
+    starts = runs_of_index(np.arange(walk.size))
+    assert fit_axis_noise(walk, starts, max_order=4).kind in {"rw", "level"}
+    white = fit_axis_noise(rng.normal(scale=2.0, size=20_000), starts, max_order=4)
+    assert white.kind == "ar" and white.phi.size == 0
+    assert white.sigma_nt == pytest.approx(2.0, rel=0.03)
+
+
+def test_whitening_restarts_at_each_run() -> None:
+    index = np.r_[np.arange(10), np.arange(50, 60)]
+    starts = runs_of_index(index)
+    assert starts.tolist() == [0] * 10 + [10] * 10
+
+
+def _tiny(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray, Gram]:
+    n = 40
+    xc = np.column_stack([np.ones(n), rng.normal(size=(n, 11))])
+    xe = rng.normal(size=(n, 3))
+    y = xc @ rng.normal(size=12) + 0.8 * xe[:, 0] + rng.normal(size=n)
+    gram = Gram(xc.T @ xc, xc.T @ xe, xc.T @ y, xe.T @ xe, xe.T @ y, float(y @ y), n)
+    return xc, xe, y, gram
+
+
+def _log_normal(y: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> float:
+    _sign, logdet = np.linalg.slogdet(cov)
+    d = y - mean
+    return float(-0.5 * (logdet + d @ np.linalg.solve(cov, d) + y.size * np.log(2 * np.pi)))
+
+
+def test_evidence_matches_a_brute_force_gaussian_integral() -> None:
+    """The flat prior on the calibration is the limit of a wide Gaussian one: the log ratio of
+    two models' evidence equals the brute-force ratio of marginal densities as the width grows."""
+    xc, xe, y, gram = _tiny(np.random.default_rng(2))
+    proj = project(gram)
+    wide = 1e4
+    cov_c = wide**2 * xc @ xc.T
+    mean = np.array([0.2, -0.1, 0.0])
+    sd = np.array([1.5, 0.7, 2.0])
+    null = log_evidence(proj, np.zeros(0, dtype=np.intp), np.zeros(0), np.zeros(0))[0]
+    brute_null = _log_normal(y, np.zeros_like(y), np.eye(y.size) + cov_c)
+    for cols in ([0], [1, 2], [0, 1, 2]):
+        ix = np.array(cols, dtype=np.intp)
+        ours = log_evidence(proj, ix, mean[ix], sd[ix])[0] - null
+        cov = np.eye(y.size) + cov_c + xe[:, ix] @ np.diag(sd[ix] ** 2) @ xe[:, ix].T
+        brute = _log_normal(y, xe[:, ix] @ mean[ix], cov) - brute_null
+        assert ours == pytest.approx(brute, abs=1e-4)
+
+
+def test_posterior_probabilities_sum_to_one_over_every_model() -> None:
+    _, _, _, gram = _tiny(np.random.default_rng(3))
+    aug = augment(gram, np.zeros(12), np.full(12, 1e3), 0.0)
+    forms = [
+        Form(name, None, slice(i, i + 1), np.zeros(1), np.ones(1), 1)  # type: ignore[arg-type]
+        for i, name in enumerate(["a", "b", "c"])
+    ]
+    post = posterior(aug, forms, expected_effects=1.0, max_effects=2, n_catalogue=11)
+    assert len(post.models) == 1 + 3 + 3
+    assert post.prob.sum() == pytest.approx(1.0)
+    inc = post.inclusion()
+    assert all(0.0 <= p <= 1.0 for p in inc.values())
+    # inclusion = the sum over the models that hold the effect
+    for name, i in zip("abc", range(3), strict=True):
+        assert inc[name] == pytest.approx(
+            sum(p for m, p in zip(post.models, post.prob, strict=True) if i in m)
+        )
+    assert inc["a"] > 0.9  # the injected column
+    for a, b in itertools.combinations("abc", 2):
+        assert post.pair(a, b) <= min(inc[a], inc[b]) + 1e-12
+
+
+def test_newey_west_variance_of_white_noise_is_its_variance() -> None:
+    x = np.random.default_rng(4).normal(size=50_000)
+    assert newey_west_variance(x) == pytest.approx(1.0, rel=0.03)
+
+
+def _simulated(effect: str | None, seed: int, real_tles_text: str):  # type: ignore[no-untyped-def]
+    from orbitcal.diagnose.options import DiagnosisOptions
+    from orbitcal.diagnose.prepare import diagnosis_data
+    from orbitcal.orbit import Orbit
+    from orbitcal.simulate import Tumbling, make_effect, select_tle, simulate_world
+
+    tle = select_tle(real_tles_text, norad_id=39452, at_utc_s=1.69e9)
+    world = simulate_world(
+        tle,
+        start_utc_s=tle.epoch_utc_s + 3600.0,
+        duration_s=4 * 5600.0,
+        cadence_s=20.0,
+        rng=np.random.default_rng(seed),
+        attitude=Tumbling(),
+        effects=[make_effect(effect)] if effect else [],
+    )
+    options = DiagnosisOptions(learned=False)
+    return diagnosis_data(world.telemetry, orbit=Orbit.from_tle(tle.text), options=options)
+
+
+def test_inclusion_high_for_an_injected_effect_and_low_on_a_null_world(
+    real_tles_text: str,
+) -> None:
+    """Worlds of the project's simulator: a magnetorquer coupling, and none."""
+    for effect in ("magnetorquer", None):
+        data = _simulated(effect, 5, real_tles_text)
+        train, holdout = training_split(data)
+        md = model_diagnosis(data, train, holdout)
+        inc = md.inclusion()
+        assert md.posterior.prob.sum() == pytest.approx(1.0)
+        if effect is None:
+            assert max(inc.values()) < 0.5, inc
+            assert md.chosen == () and md.confirmation.p_value == 1.0
+            assert md.probability("none") > 0.5
+        else:
+            assert inc[effect] > 0.99, inc
+            assert md.chosen[0] == effect
+            assert md.confirmation.p_value < 1e-3
+            c = md.confirmation
+            assert c.holdout_rms_after_nt < c.holdout_rms_before_nt
+
+
+def test_the_final_block_does_not_take_part_in_selection() -> None:
+    """Changing only the final block's data leaves the posterior and the chosen model as they
+    were, and changes the confirmation."""
+    world = make_world("temperature", attitude="tumbling", seed=3)
+    train, holdout = training_split(world.data)
+    forms = candidate_forms(world.data, train, ModelOptions())
+    before = model_diagnosis(world.data, train, holdout, forms=forms)
+    raw = world.data.b_raw_nt.copy()
+    raw[holdout] += 50.0 * np.random.default_rng(9).normal(size=(int(holdout.sum()), 3))
+    changed = dataclasses.replace(world.data, b_raw_nt=raw)
+    after = model_diagnosis(changed, train, holdout, forms=forms)
+    assert after.chosen == before.chosen == ("temperature",)
+    np.testing.assert_array_equal(after.posterior.prob, before.posterior.prob)
+    assert after.confirmation.holdout_rms_before_nt > 4 * before.confirmation.holdout_rms_before_nt
+
+
+def _check_keys(report: dict) -> None:  # type: ignore[type-arg]
+    assert report["effects"]
+    for e in report["effects"]:
+        assert 0.0 <= e["probability"] <= 1.0
+    assert 0.0 <= report["verdict_probability"] <= 1.0
+    conf = report["confirmation"]
+    assert set(conf) >= {"holdout_rms_before_nt", "holdout_rms_after_nt", "p_value"}
+    assert 0.0 <= conf["p_value"] <= 1.0
+    assert conf["holdout_rms_before_nt"] > 0.0 and conf["holdout_rms_after_nt"] > 0.0
+    json.dumps(report, allow_nan=False)
+
+
+def test_library_report_has_the_probability_keys() -> None:
+    from orbitcal.diagnose.api import diagnose_data
+    from orbitcal.diagnose.options import DiagnosisOptions
+
+    world = make_world("external_field", attitude="tumbling", seed=7)
+    report = diagnose_data(world.data, options=DiagnosisOptions(learned=False)).report.to_json()
+    _check_keys(report)
+    assert report["verdict"] == "external_field"
+    assert report["verdict_probability"] > 0.99
+    assert report["model"]["inclusion_probability"]["external_field"] > 0.99
+    c = report["confirmation"]
+    assert c["p_value"] < 1e-3
+
+
+def test_cli_report_has_the_probability_keys_under_the_model_engine(
+    tmp_path: Path, real_tles_text: str
+) -> None:
+    from orbitcal.cli import main
+    from orbitcal.simulate import Tumbling, make_effect, select_tle, simulate_world
+
+    tle = select_tle(real_tles_text, norad_id=39452, at_utc_s=1.69e9)
+    world = simulate_world(
+        tle,
+        start_utc_s=tle.epoch_utc_s + 3600.0,
+        duration_s=3 * 5600.0,
+        cadence_s=20.0,
+        rng=np.random.default_rng(1),
+        attitude=Tumbling(),
+        effects=[make_effect("magnetorquer")],
+    )
+    paths = world.write(tmp_path / "world")
+    out = tmp_path / "report.json"
+    args = ["diagnose", str(paths["telemetry"]), "--tle", str(paths["tle"]), "--out", str(out)]
+    assert main([*args, "--engine", "model"]) == 0
+    report = json.loads(out.read_text())
+    _check_keys(report)
+    assert report["model"]["engine"] == "model"
+    assert report["verdict"] == "magnetorquer" and report["verdict_probability"] > 0.99
+    assert report["effects"][0]["name"] == "magnetorquer"
+
+
+def test_model_options_refuse_an_unknown_engine() -> None:
+    with pytest.raises(ValueError, match="engine"):
+        ModelOptions(engine="votes")
