@@ -10,14 +10,13 @@ runs what ``orbitcal bench diagnose [--compound] --cases N --seed S`` runs
 with the benchmark's options (``bench.BENCH_OPTIONS``) given
 ``engine=ENGINE``; the worlds are the seed's, the same for each engine. The run's JSON holds each
 engine's summary and cases; ``benchmarks/independent/tables.py --engines`` puts the panels side by
-side. Until ``DiagnosisOptions`` has its ``engine`` field only ``--engine rules`` runs (the
+side. Until ``DiagnosisOptions.model`` has its ``engine`` field only ``--engine rules`` runs (the
 default engine) and the others stop with a message saying so.
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import gzip
 import json
 import subprocess
@@ -27,13 +26,13 @@ from pathlib import Path
 from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "benchmarks" / "independent"))
+from engine_cli import engine_support, options_with_engine  # noqa: E402
 
 
 def _engines(choice: str) -> tuple[list[str], str]:
-    from orbitcal.diagnose.options import DiagnosisOptions
-
     engines = ["rules", "model"] if choice == "both" else [choice]
-    if "engine" in {f.name for f in dataclasses.fields(DiagnosisOptions)}:
+    if engine_support():
         return engines, "option"
     if engines != ["rules"]:
         raise SystemExit(
@@ -51,7 +50,7 @@ def run_panel(panel: str, cases: int, seed: int, engine: str, chosen_by: str) ->
 
     saved = bench.BENCH_OPTIONS
     if chosen_by == "option":
-        bench.BENCH_OPTIONS = dataclasses.replace(saved, engine=engine)  # type: ignore[call-arg]
+        bench.BENCH_OPTIONS = options_with_engine(saved, engine)
     try:
         run = bench.run_compound_benchmark if panel == "compound" else bench.run_benchmark
         t0 = time.time()

@@ -1,4 +1,4 @@
-"""``orbitcal`` on the command line with the engine chosen: ``DiagnosisOptions(engine=...)``.
+"""``orbitcal`` on the command line with the engine chosen: ``DiagnosisOptions.model.engine``.
 
     python benchmarks/independent/engine_cli.py ENGINE diagnose TABLE --out REPORT.json [...]
 
@@ -23,16 +23,26 @@ ENGINE_FIELD = "engine"
 
 
 def engine_support() -> bool:
-    """Whether ``DiagnosisOptions`` has the ``engine`` field."""
-    from orbitcal.diagnose.options import DiagnosisOptions
+    """Whether the diagnosis options choose an engine (``DiagnosisOptions.model.engine``)."""
+    from orbitcal.diagnose import options
 
-    return ENGINE_FIELD in {f.name for f in dataclasses.fields(DiagnosisOptions)}
+    model_options = getattr(options, "ModelOptions", None)
+    if model_options is None:
+        return False
+    return ENGINE_FIELD in {f.name for f in dataclasses.fields(model_options)}
+
+
+def options_with_engine(options: Any, engine: str) -> Any:
+    """``options`` (a ``DiagnosisOptions``) with the engine ``engine``."""
+    return dataclasses.replace(
+        options, model=dataclasses.replace(options.model, **{ENGINE_FIELD: engine})
+    )
 
 
 def missing_engine_message(engine: str) -> str:
     return (
         f"cannot run the diagnosis with engine={engine!r}: orbitcal.diagnose.options."
-        f"DiagnosisOptions has no field {ENGINE_FIELD!r} (issue 43's model-based core is not in "
+        f"ModelOptions has no field {ENGINE_FIELD!r} (issue 43's model-based core is not in "
         "this checkout); only --engine rules runs, as the default engine"
     )
 
@@ -49,7 +59,7 @@ def _with_engine(engine: str) -> None:
             from orbitcal.diagnose.options import DiagnosisOptions
 
             options = DiagnosisOptions()
-        kwargs["options"] = dataclasses.replace(options, **{ENGINE_FIELD: engine})
+        kwargs["options"] = options_with_engine(options, engine)
         return original(*args, **kwargs)
 
     api.diagnose = diagnose  # type: ignore[assignment]
