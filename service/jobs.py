@@ -445,11 +445,12 @@ class InlineRunner:
         )
 
     def shutdown(self, timeout_s: float | None = None) -> None:
-        """Cancel queued jobs (still ``queued`` in the database: resubmitted at the next start);
-        wait for a running one at most ``timeout_s`` (default ``settings.shutdown_timeout_s``),
-        then leave it behind: it is failed as interrupted at the next start."""
+        """Let the jobs submitted run for at most ``timeout_s`` (default
+        ``settings.shutdown_timeout_s``); then a job not started is cancelled (still ``queued``
+        in the database: resubmitted at the next start) and a running one is left behind (failed
+        as interrupted at the next start)."""
         wait_s = self.settings.shutdown_timeout_s if timeout_s is None else timeout_s
-        if not self.pool.shutdown(timeout_s=wait_s):
+        if not self.pool.shutdown(timeout_s=wait_s, cancel_pending=False):
             log.warning(
                 "a retraining still running at shutdown is left behind",
                 extra={"waited_s": wait_s},

@@ -3,8 +3,8 @@
 ``concurrent.futures.ThreadPoolExecutor`` joins its threads when the interpreter exits, so a
 retraining or a diagnosis still running when the service stops kept the process alive until it
 ended (``orbitcal demo --keep-serving`` was still running 120 s after Ctrl-C on a loaded
-machine). :class:`DaemonPool` runs the same work on daemon threads: its shutdown cancels what
-has not started, waits for what runs at most ``timeout_s``, and then lets the process go. Work
+machine). :class:`DaemonPool` runs the same work on daemon threads: its shutdown waits at most
+``timeout_s``, cancels what has not started by then, and lets the process go. Work
 cut off that way is the work of a process that stopped: a retraining's transaction is never
 committed and its job is failed as interrupted at the next start (``recover_interrupted``).
 """
@@ -31,6 +31,7 @@ class DaemonPool:
     def __init__(self, workers: int, name: str) -> None:
         self._queue: queue.SimpleQueue[_Item | None] = queue.SimpleQueue()
         self._closed = False
+        self._abandoned = False
         self._threads = [
             threading.Thread(target=self._work, name=f"{name}-{i}", daemon=True)
             for i in range(max(1, workers))
@@ -48,29 +49,39 @@ class DaemonPool:
     def _work(self) -> None:
         while (item := self._queue.get()) is not None:
             future, fn, args, kwargs = item
-            if not future.set_running_or_notify_cancel():
+            if self._abandoned or not future.set_running_or_notify_cancel():
+                future.cancel()
                 continue
             try:
                 future.set_result(fn(*args, **kwargs))
             except BaseException as exc:  # handed to whoever waits on the future
                 future.set_exception(exc)
 
-    def shutdown(self, timeout_s: float = 0.0) -> bool:
-        """Cancel what has not started; wait up to ``timeout_s`` for what runs.
-
-        Returns whether every thread has ended (False: work still running is left behind).
-        """
-        self._closed = True
+    def _cancel_pending(self) -> None:
         while True:
             try:
                 item = self._queue.get_nowait()
             except queue.Empty:
-                break
+                return
             if item is not None:
                 item[0].cancel()
+
+    def shutdown(self, timeout_s: float = 0.0, *, cancel_pending: bool = True) -> bool:
+        """Refuse new work; wait up to ``timeout_s`` for what runs (and, unless
+        ``cancel_pending``, for what is queued); cancel what has not started by then.
+
+        Returns whether every thread has ended (False: work still running is left behind).
+        """
+        self._closed = True
+        if cancel_pending:
+            self._cancel_pending()
         for _ in self._threads:
-            self._queue.put(None)
+            self._queue.put(None)  # behind what is queued: each thread ends after it
         deadline = time.monotonic() + timeout_s
         for thread in self._threads:
             thread.join(max(0.0, deadline - time.monotonic()))
+        self._abandoned = True  # a thread still busy cancels whatever it takes next
+        self._cancel_pending()
+        for _ in self._threads:
+            self._queue.put(None)
         return not any(thread.is_alive() for thread in self._threads)

@@ -62,3 +62,14 @@ def test_shutdown_cancels_what_has_not_started_and_results_come_back() -> None:
         pool.submit(lambda: 0)
     blocker.set()
     assert running.result(timeout=60) is True
+
+
+def test_without_cancelling_queued_work_runs_within_the_deadline() -> None:
+    """The retraining runner's shutdown: what was submitted runs if the deadline allows."""
+    pool = DaemonPool(1, "t")
+    release = threading.Event()
+    first = pool.submit(release.wait)
+    queued = pool.submit(lambda: "ran")
+    release.set()
+    assert pool.shutdown(timeout_s=60, cancel_pending=False) is True
+    assert first.result(timeout=0) is True and queued.result(timeout=0) == "ran"
