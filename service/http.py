@@ -7,8 +7,8 @@ whole and its cost grows faster than linearly with it (``benchmarks/http_headers
 doubling from 4 to 8 MiB, against ×2 for h11). The service therefore runs on one of two
 subclasses of uvicorn's protocols, chosen by ``ORBITCAL_HTTP_PROTOCOL``:
 
-* :class:`LimitedHttpToolsProtocol` (``httptools``, the default): the C parser, 2.5× the
-  requests/s of h11 (``benchmarks/results/load_reads.md``); the header limit below is enforced
+* :class:`LimitedHttpToolsProtocol` (``httptools``, the default): the C parser, half of h11's
+  server CPU per request (``benchmarks/results/load_reads.md``); the header limit below is enforced
   before a byte reaches the parser, so its quadratic path is never taken;
 * :class:`LimitedH11Protocol` (``h11``): pure Python, linear in what it buffers.
 

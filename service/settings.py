@@ -63,7 +63,7 @@ class Settings(BaseSettings):
     shutdown_timeout_s: float = Field(default=10.0, gt=0, le=3600)
     max_connections: int = Field(default=1000, ge=1)
     #: The HTTP/1.1 implementation under those limits (``service.http``): ``httptools`` (the C
-    #: parser, the default: 2.5x the requests/s of h11, ``benchmarks/results/load_reads.md``) or
+    #: parser, the default: half of h11's server CPU per request, ``benchmarks/results/load_reads.md``) or
     #: ``h11`` (pure Python). Both enforce every limit above the same way.
     http_protocol: Literal["httptools", "h11"] = "httptools"
     #: Proxies whose ``X-Forwarded-For``/``X-Forwarded-Proto`` are believed (comma-separated
