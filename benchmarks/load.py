@@ -28,9 +28,13 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import collections
+import multiprocessing
 import os
 import platform
+import queue
 import secrets
+import select
 import socket
 import subprocess
 import sys
@@ -39,6 +43,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import httpx
 import numpy as np
@@ -96,10 +101,18 @@ def free_port() -> int:
 
 
 def start_server(
-    db: Path, port: int, admin_key: str, log: Path, *, repo: Path = REPO, workers: int = 1
+    db: Path,
+    port: int,
+    admin_key: str,
+    log: Path,
+    *,
+    repo: Path = REPO,
+    workers: int = 1,
+    extra_env: dict[str, str] | None = None,
 ) -> subprocess.Popen[bytes]:
     env = {
         **os.environ,
+        **(extra_env or {}),
         "ORBITCAL_ADMIN_KEY": admin_key,
         "ORBITCAL_LOG_LEVEL": "WARNING",
         "ORBITCAL_RATE_LIMIT_PER_S": "0",  # measure the service, not the limiter
@@ -359,91 +372,277 @@ def run_reads(
     return result
 
 
+#: The attacks run beside the readers (``--attacks``): six clients each, in a process of their own.
+ATTACKS = ("slow bodies", "header flood")
+ATTACKERS = 6
+FLOOD_BYTES = 32 * 2**20
+
+
+def _flood_one(port: int, stop_at: float, answers: list[int]) -> None:
+    """Requests with a 32 MiB header value, one after another, until ``stop_at``."""
+    piece = b"a" * 65536
+    while time.monotonic() < stop_at:
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=60) as s:
+                s.sendall(b"GET /v1/spacecraft HTTP/1.1\r\nHost: x\r\nX-Pad: ")
+                sent = 0
+                while sent < FLOOD_BYTES and not select.select([s], [], [], 0)[0]:
+                    s.sendall(piece)
+                    sent += len(piece)
+                s.sendall(b"\r\n\r\n")
+                head = s.recv(64)
+                answers.append(int(head[9:12]) if head.startswith(b"HTTP/1.1 ") else -1)
+        except OSError:
+            answers.append(-1)
+
+
+def _trickle_one(port: int, path: str, key: str, stop_at: float, answers: list[int]) -> None:
+    """An upload that sends one byte every 0.5 s (under the idle limit) until ``stop_at``."""
+    while time.monotonic() < stop_at:
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=60) as s:
+                s.sendall(
+                    f"POST {path} HTTP/1.1\r\nHost: x\r\nX-API-Key: {key}\r\n"
+                    f"Content-Type: text/csv\r\nContent-Length: {2**20}\r\n\r\n"
+                    "time,b_x\r\n".encode()
+                )
+                while time.monotonic() < stop_at and not select.select([s], [], [], 0.5)[0]:
+                    s.sendall(b"1")
+                head = s.recv(64) if time.monotonic() < stop_at else b""
+                if head:
+                    answers.append(int(head[9:12]) if head.startswith(b"HTTP/1.1 ") else -1)
+        except OSError:
+            answers.append(-1)
+
+
+def _attack(kind: str, port: int, path: str, key: str, duration_s: float, out: Any) -> None:
+    """``ATTACKERS`` threads of one attack for ``duration_s``; their answers go to ``out``."""
+    stop_at = time.monotonic() + duration_s
+    answers: list[int] = []
+    threads = [
+        threading.Thread(
+            target=_flood_one if kind == "header flood" else _trickle_one,
+            args=(port, stop_at, answers)
+            if kind == "header flood"
+            else (port, path, key, stop_at, answers),
+            daemon=True,
+        )
+        for _ in range(ATTACKERS)
+    ]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=max(0.0, stop_at - time.monotonic()) + 5)
+    out.put(answers)
+
+
+def reads_under_attack(
+    kind: str,
+    port: int,
+    *,
+    pid: int,
+    ids: list[str],
+    admin_key: str,
+    read_key: str,
+    clients: int,
+    duration_s: float,
+) -> tuple[LoadResult, str]:
+    """The readers of :func:`run_reads` while six clients run ``kind`` (a separate process)."""
+    ctx = multiprocessing.get_context("fork")
+    out = ctx.Queue()
+    path = f"/v1/spacecraft/{ids[0]}/telemetry"
+    attacker = ctx.Process(
+        target=_attack, args=(kind, port, path, admin_key, duration_s + 1, out), daemon=True
+    )
+    attacker.start()
+    time.sleep(1.0)  # the attack is under way when the readers start
+    try:
+        result = run_reads(
+            port, pid=pid, ids=ids, read_key=read_key, clients=clients, duration_s=duration_s
+        )
+        try:
+            answers: list[int] = out.get(timeout=30)
+        except queue.Empty:
+            answers = []
+    finally:
+        attacker.terminate()
+        attacker.join(timeout=10)
+    tally = ", ".join(
+        f"{n} × {'no answer' if code == -1 else code}"
+        for code, n in sorted(collections.Counter(answers).items())
+    )
+    return result, tally or "none finished"
+
+
+@dataclass
+class ReadsRound:
+    label: str
+    quiet: LoadResult
+    attacked: dict[str, tuple[LoadResult, str]] = field(default_factory=dict)
+
+
 def _reads_round(
     repo: Path,
     label: str,
     tmp: Path,
-    clients: int,
-    duration_s: float,
-    n_spacecraft: int,
+    args: argparse.Namespace,
     workers: int = 1,
-) -> tuple[str, LoadResult]:
+    extra_env: dict[str, str] | None = None,
+) -> ReadsRound:
     admin_key = "load-" + secrets.token_hex(16)
     port = free_port()
     url = f"http://127.0.0.1:{port}"
-    db = tmp / f"reads-{label}-{secrets.token_hex(4)}.sqlite"
-    proc = start_server(db, port, admin_key, tmp / "server.log", repo=repo, workers=workers)
+    db = tmp / f"reads-{secrets.token_hex(4)}.sqlite"
+    proc = start_server(
+        db, port, admin_key, tmp / "server.log", repo=repo, workers=workers, extra_env=extra_env
+    )
+    reads = {"clients": args.clients, "duration_s": args.duration}
     try:
         wait_healthy(url, proc)
-        ids, _jobs, read_key = prepare(url, admin_key, n_spacecraft)
+        ids, _jobs, read_key = prepare(url, admin_key, args.spacecraft)
         # warm-up: fills the key and document caches, like any server that has been running
-        run_reads(port, pid=proc.pid, ids=ids, read_key=read_key, clients=clients, duration_s=2)
-        result = run_reads(
-            port, pid=proc.pid, ids=ids, read_key=read_key, clients=clients, duration_s=duration_s
+        run_reads(
+            port, pid=proc.pid, ids=ids, read_key=read_key, clients=args.clients, duration_s=2
         )
+        out = ReadsRound(label, run_reads(port, pid=proc.pid, ids=ids, read_key=read_key, **reads))
+        for kind in ATTACKS if args.attacks else ():
+            out.attacked[kind] = reads_under_attack(
+                kind, port, pid=proc.pid, ids=ids, admin_key=admin_key, read_key=read_key, **reads
+            )
     finally:
         proc.terminate()
-        proc.wait(timeout=30)
-    return label, result
+        try:
+            proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+    return out
 
 
-def reads_main(args: argparse.Namespace) -> str:
-    """Calibration reads only, this checkout against ``--compare-with`` in alternating rounds."""
-    rows: list[tuple[str, LoadResult]] = []
+def _servers(args: argparse.Namespace, tmp: Path) -> list[tuple[str, Path, int, dict[str, str]]]:
+    """(label, checkout, workers, environment) of every server measured; peers checked out."""
+    servers: list[tuple[str, Path, int, dict[str, str]]] = []
+    for i, rev in enumerate(args.compare_with):
+        other = tmp / f"peer-{i}"
+        subprocess.run(
+            ["git", "-C", str(REPO), "worktree", "add", "--detach", str(other), rev],
+            check=True,
+            capture_output=True,
+        )
+        servers.append((f"`{rev}`", other, 1, {}))
+    for protocol in args.protocols.split(","):
+        env = {"ORBITCAL_HTTP_PROTOCOL": protocol}
+        servers.append((f"this checkout ({protocol})", REPO, 1, env))
+        if args.workers > 1:
+            servers.append(
+                (f"this checkout ({protocol}), {args.workers} workers", REPO, args.workers, env)
+            )
+    return servers
+
+
+def reads_main(args: argparse.Namespace) -> list[ReadsRound]:
+    """Calibration reads only: every server of :func:`_servers` in alternating rounds."""
+    rounds: list[ReadsRound] = []
     with tempfile.TemporaryDirectory(prefix="orbitcal-reads-") as tmp_name:
         tmp = Path(tmp_name)
-        servers = [("this checkout", REPO, 1)]
-        if args.workers > 1:
-            servers.append((f"this checkout, {args.workers} workers", REPO, args.workers))
-        if args.compare_with:
-            other = tmp / "peer"
-            subprocess.run(
-                [
-                    "git",
-                    "-C",
-                    str(REPO),
-                    "worktree",
-                    "add",
-                    "--detach",
-                    str(other),
-                    args.compare_with,
-                ],
-                check=True,
-                capture_output=True,
-            )
-            servers.insert(0, (f"`{args.compare_with}`", other, 1))
+        servers = []
         try:
+            servers = _servers(args, tmp)
             for _ in range(args.rounds):
-                for label, repo, workers in servers:
-                    rows.append(
-                        _reads_round(
-                            repo, label, tmp, args.clients, args.duration, args.spacecraft, workers
-                        )
-                    )
+                for label, repo, workers, env in servers:
+                    rounds.append(_reads_round(repo, label, tmp, args, workers, env))
         finally:
-            if args.compare_with:
+            for i in range(len(args.compare_with)):
                 subprocess.run(
-                    ["git", "-C", str(REPO), "worktree", "remove", "--force", str(tmp / "peer")],
+                    [
+                        "git",
+                        "-C",
+                        str(REPO),
+                        "worktree",
+                        "remove",
+                        "--force",
+                        str(tmp / f"peer-{i}"),
+                    ],
                     check=False,
                     capture_output=True,
                 )
-    lines = [
+    return rounds
+
+
+def _row(label: str, r: LoadResult, extra: str = "") -> str:
+    n = max(1, r.requests)
+    return (
+        f"| {label} | {r.requests / r.duration_s:.0f} | {r.percentile_ms('calibration', 50):.2f} | "
+        f"{r.percentile_ms('calibration', 99):.2f} | {1e3 * r.server_cpu_s / n:.3f} | "
+        f"{1e3 * r.client_cpu_s / n:.3f} | {r.load_average:.1f} | {len(r.errors)} |{extra}"
+    )
+
+
+def reads_tables(rounds: list[ReadsRound]) -> str:
+    """The quiet table, and (with ``--attacks``) the readers' figures under each attack."""
+    head = (
         "| server | requests/s | p50 [ms] | p99 [ms] | server CPU / request [ms] | "
-        "client CPU / request [ms] | load average | errors |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
-    for label, r in rows:
-        n = max(1, r.requests)
-        p50 = r.percentile_ms("calibration", 50)
-        p99 = r.percentile_ms("calibration", 99)
-        cpu_ms = 1e3 * r.server_cpu_s / n
-        client_ms = 1e3 * r.client_cpu_s / n
-        rate = r.requests / r.duration_s
-        lines.append(
-            f"| {label} | {rate:.0f} | {p50:.2f} | {p99:.2f} | {cpu_ms:.3f} | {client_ms:.3f} | "
-            f"{r.load_average:.1f} | {len(r.errors)} |"
-        )
+        "client CPU / request [ms] | load average | errors |"
+    )
+    lines = [head, "|---|---|---|---|---|---|---|---|"]
+    lines += [_row(r.label, r.quiet) for r in rounds]
+    if any(r.attacked for r in rounds):
+        lines += [
+            "",
+            f"The same readers while {ATTACKERS} other clients attack (same servers, same rounds): "
+            "*slow bodies* = uploads sending one byte every 0.5 s (under the idle limit), "
+            "*header flood* = requests with a 32 MiB header value, one after another; "
+            "the attackers' answers in the last column.",
+            "",
+            head.replace("| server |", "| server | attack |") + " attackers' answers |",
+            "|---|---|---|---|---|---|---|---|---|---|",
+        ]
+        for r in rounds:
+            for kind, (res, tally) in r.attacked.items():
+                lines.append(_row(f"{r.label} | {kind}", res, f" {tally} |"))
     return "\n".join(lines)
+
+
+def _median(values: list[float]) -> float:
+    return float(np.median(values)) if values else float("nan")
+
+
+def readme_figure(rounds: list[ReadsRound], *, ours: str, peer: str | None) -> str:
+    """The README's cell: this checkout's median p99 and requests/s, the peer's in the same run."""
+
+    def stats(label: str) -> tuple[float, float, dict[str, float]]:
+        mine = [r for r in rounds if r.label == label]
+        rate = _median([r.quiet.requests / r.quiet.duration_s for r in mine])
+        p99 = _median([r.quiet.percentile_ms("calibration", 99) for r in mine])
+        attacked = {
+            kind: _median([r.attacked[kind][0].percentile_ms("calibration", 99) for r in mine])
+            for kind in ATTACKS
+            if all(kind in r.attacked for r in mine)
+        }
+        return rate, p99, attacked
+
+    rate, p99, attacked = stats(ours)
+    text = f"p99 {p99:.1f} ms, {rate:,.0f} req/s"
+    if attacked:
+        text += "; p99 " + ", ".join(f"{v:.1f} ms under {k}" for k, v in attacked.items())
+    if peer is not None:
+        peer_rate, peer_p99, _ = stats(peer)
+        text += (
+            f" ({rate / peer_rate:.2f}× the req/s of {peer.strip('`')}, whose p99 was "
+            f"{peer_p99:.1f} ms in the same run)"
+        )
+    return text + " (median of rounds, `benchmarks/load.py --reads-only`)"
+
+
+README_BEGIN = "<!-- load_reads -->"
+README_END = "<!-- /load_reads -->"
+
+
+def update_readme(figure: str, readme: Path = REPO / "README.md") -> None:
+    """Rewrite the text between the README's ``load_reads`` markers."""
+    text = readme.read_text()
+    start, end = text.index(README_BEGIN) + len(README_BEGIN), text.index(README_END)
+    readme.write_text(text[:start] + figure + text[end:])
 
 
 def machine() -> str:
@@ -493,6 +692,46 @@ def report(result: LoadResult, *, warmup_s: float) -> str:
     return "\n".join(lines)
 
 
+def reads_only(args: argparse.Namespace) -> None:
+    """``--reads-only``: run, write ``--out`` (and the README's figure with ``--readme``)."""
+    started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
+    where = machine()
+    rounds = reads_main(args)
+    command = (
+        f"python benchmarks/load.py --reads-only --duration {args.duration:g} "
+        f"--clients {args.clients} --spacecraft {args.spacecraft} --rounds {args.rounds}"
+        + "".join(f" --compare-with {rev}" for rev in args.compare_with)
+        + (f" --protocols {args.protocols}" if args.protocols != "httptools,h11" else "")
+        + (f" --workers {args.workers}" if args.workers > 1 else "")
+        + (" --attacks" if args.attacks else "")
+        + (" --readme" if args.readme else "")
+    )
+    ours = f"this checkout ({args.protocols.split(',')[0]})"
+    peer = f"`{args.compare_with[0]}`" if args.compare_with else None
+    figure = readme_figure(rounds, ours=ours, peer=peer)
+    text = "\n".join(
+        [
+            "# Reads under load: `GET /v1/spacecraft/{id}/calibration` (`benchmarks/load.py`)",
+            "",
+            f"Machine: {where}.",
+            f"Run: `{command}` from {started}; `orbitcal serve` (one process, or `--workers N`; "
+            "`this checkout (P)` runs with `ORBITCAL_HTTP_PROTOCOL=P`), SQLite; clients in one "
+            "process (raw HTTP/1.1 keep-alive, closed loop) on the same 2 cores as the server; "
+            "servers measured in alternating rounds. Load average at the end of each run in its "
+            "row: the machine is shared, so compare rows of one run, not runs.",
+            "",
+            reads_tables(rounds),
+            "",
+            f"Summary ({ours}, the README's figure): {figure}.",
+            "",
+        ]
+    )
+    args.out.write_text(text)
+    if args.readme:
+        update_readme(figure)
+    print(text)
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--duration", type=float, default=300.0, help="seconds of load (default 300)")
@@ -501,32 +740,36 @@ def main() -> None:
     p.add_argument("--ingest-share", type=float, default=0.2)
     p.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "load.md")
     p.add_argument("--reads-only", action="store_true", help="only GET calibration, raw client")
-    p.add_argument("--compare-with", default="", help="--reads-only: git revision of the peer")
+    p.add_argument(
+        "--compare-with",
+        action="append",
+        default=[],
+        metavar="REV",
+        help="--reads-only: git revision of a peer server (repeatable)",
+    )
     p.add_argument("--rounds", type=int, default=2, help="--reads-only: alternating rounds")
     p.add_argument("--workers", type=int, default=1, help="--reads-only: also N API processes")
+    p.add_argument(
+        "--protocols",
+        default="httptools,h11",
+        help="--reads-only: ORBITCAL_HTTP_PROTOCOL values this checkout runs with (first: the "
+        "README's figure)",
+    )
+    p.add_argument(
+        "--attacks",
+        action="store_true",
+        help="--reads-only: also measure the readers while six clients trickle bodies, then "
+        "while six send 32 MiB header values",
+    )
+    p.add_argument(
+        "--readme",
+        action="store_true",
+        help="--reads-only: write this checkout's figure into README.md (between its "
+        "load_reads markers)",
+    )
     args = p.parse_args()
     if args.reads_only:
-        table = reads_main(args)
-        text = "\n".join(
-            [
-                "# Reads under load: `GET /v1/spacecraft/{id}/calibration` (`benchmarks/load.py`)",
-                "",
-                f"Machine: {machine()}.",
-                f"Run: `python benchmarks/load.py --reads-only --duration {args.duration:g} "
-                f"--clients {args.clients} --spacecraft {args.spacecraft} --rounds {args.rounds}"
-                + (f" --compare-with {args.compare_with}" if args.compare_with else "")
-                + (f" --workers {args.workers}" if args.workers > 1 else "")
-                + f"` on {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; `orbitcal serve` "
-                "(one process, or `--workers N`), SQLite; "
-                "clients in one process (raw HTTP/1.1 keep-alive, closed loop) on the same 2 "
-                "cores as the server; servers measured in alternating rounds.",
-                "",
-                table,
-                "",
-            ]
-        )
-        args.out.write_text(text)
-        print(text)
+        reads_only(args)
         return
     admin_key = "load-" + secrets.token_hex(16)
     with tempfile.TemporaryDirectory(prefix="orbitcal-load-") as tmp:

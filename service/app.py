@@ -24,7 +24,7 @@ import orbitcal
 from service.auth import is_loopback
 from service.handlers import add_exception_handlers
 from service.health_worker import HealthWorker
-from service.http import HeaderCount
+from service.http import HeaderChecks
 from service.jobs import FitFunction, InlineRunner, JobRunner, recover_interrupted
 from service.logs import configure_logging, redact_url
 from service.metrics import Metrics
@@ -238,8 +238,8 @@ def add_middleware(app: FastAPI, settings: Settings, state: ServiceState) -> Non
     """The middleware stack; the last added is the outermost (the first a request meets).
 
     Outside in: trusted-proxy headers (the client address everything below sees), the header
-    count, the rate limiter (a throttled caller costs no body read), the access log, the body
-    size limit, the calibration fast path.
+    count and the body's framing, the rate limiter (a throttled caller costs no body read), the
+    access log, the body size limit, the calibration fast path.
     """
     app.add_middleware(calibrations.CalibrationFastPath, state=state)
     app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
@@ -253,7 +253,7 @@ def add_middleware(app: FastAPI, settings: Settings, state: ServiceState) -> Non
             auth_fail_burst=settings.auth_fail_burst,
             store=state.rate_limit_store,
         )
-    app.add_middleware(HeaderCount, limit=settings.max_header_count)
+    app.add_middleware(HeaderChecks, limit=settings.max_header_count)
     if settings.forwarded_allow_ips.strip():
         app.add_middleware(
             ProxyHeadersMiddleware,  # type: ignore[arg-type]

@@ -11,8 +11,10 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable, Hashable
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future
 from typing import TYPE_CHECKING
+
+from service.threads import DaemonPool
 
 if TYPE_CHECKING:  # pragma: no cover
     from orbitcal.diagnose.result import Report
@@ -31,16 +33,16 @@ class DiagnosisCache:
         self._reports: dict[DiagnosisKey, tuple[Hashable, Report]] = {}
         self._running: dict[DiagnosisKey, Future[Report]] = {}
         self._lock = threading.Lock()
-        self._pool: ThreadPoolExecutor | None = None
+        self._pool: DaemonPool | None = None
 
     def start(self) -> None:
         """Open the one-thread pool the computations run in (the app's lifespan calls it)."""
-        self._pool = ThreadPoolExecutor(1, thread_name_prefix="orbitcal-diagnosis")
+        self._pool = DaemonPool(1, "orbitcal-diagnosis")  # never holds the process at exit
 
     def shutdown(self) -> None:
         """Stop the pool; queued computations are cancelled, a running one is not waited for."""
         if self._pool is not None:
-            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool.shutdown(timeout_s=0.0)
             self._pool = None
 
     def latest(self, key: DiagnosisKey) -> tuple[Hashable, Report] | None:

@@ -16,7 +16,6 @@ import subprocess
 import time
 import uuid
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 from functools import cache
 from pathlib import Path
 from typing import Any, Protocol
@@ -50,6 +49,7 @@ from service.storage import (
     release_lock,
     write_tx,
 )
+from service.threads import DaemonPool
 
 __all__ = [
     "FitFunction",
@@ -472,14 +472,21 @@ class InlineRunner:
         self.settings = settings
         self.fit = fit
         self.on_done = on_done
-        self.pool = ThreadPoolExecutor(
-            max_workers=max(1, settings.inline_workers), thread_name_prefix="orbitcal-job"
-        )
+        self.pool = DaemonPool(settings.inline_workers, "orbitcal-job")
 
     def submit(self, job_id: str) -> None:
         self.pool.submit(
             run_retrain, self.engine, self.settings, job_id, fit=self.fit, on_done=self.on_done
         )
 
-    def shutdown(self) -> None:
-        self.pool.shutdown(wait=True, cancel_futures=True)
+    def shutdown(self, timeout_s: float | None = None) -> None:
+        """Let the jobs submitted run for at most ``timeout_s`` (default
+        ``settings.shutdown_timeout_s``); then a job not started is cancelled (still ``queued``
+        in the database: resubmitted at the next start) and a running one is left behind (failed
+        as interrupted at the next start)."""
+        wait_s = self.settings.shutdown_timeout_s if timeout_s is None else timeout_s
+        if not self.pool.shutdown(timeout_s=wait_s, cancel_pending=False):
+            log.warning(
+                "a retraining still running at shutdown is left behind",
+                extra={"waited_s": wait_s},
+            )

@@ -1,6 +1,6 @@
 """The service's own ASGI middleware: an access log line per request, and the body-size limit.
 
-(The others: ``service.ratelimit.RateLimit``, ``service.http.HeaderCount`` and uvicorn's
+(The others: ``service.ratelimit.RateLimit``, ``service.http.HeaderChecks`` and uvicorn's
 ``ProxyHeadersMiddleware``; their order is set in ``service.app``.)
 """
 

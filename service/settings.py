@@ -62,6 +62,11 @@ class Settings(BaseSettings):
     body_timeout_s: float = Field(default=600.0, gt=0, le=86400)
     shutdown_timeout_s: float = Field(default=10.0, gt=0, le=3600)
     max_connections: int = Field(default=1000, ge=1)
+    #: The HTTP/1.1 implementation under those limits (``service.http``): ``httptools`` (the C
+    #: parser, the default: half of h11's server CPU per request,
+    #: ``benchmarks/results/load_reads.md``) or ``h11`` (pure Python). Both enforce every limit
+    #: above the same way.
+    http_protocol: Literal["httptools", "h11"] = "httptools"
     #: Proxies whose ``X-Forwarded-For``/``X-Forwarded-Proto`` are believed (comma-separated
     #: addresses or networks, ``*`` for any; uvicorn's ``--forwarded-allow-ips`` semantics). The
     #: client address the rate limiter sees is then the one the proxy reports. Empty (the

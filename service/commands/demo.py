@@ -179,10 +179,18 @@ def _start_service(settings: Any, port: int) -> RunningService:
 
     from orbitcal.cli import CliError
     from service.app import create_app
+    from service.http import uvicorn_options
 
-    server = uvicorn.Server(
-        uvicorn.Config(create_app(settings), host="127.0.0.1", port=port, log_level="warning")
+    # the limits and the shutdown deadline of `orbitcal serve` (without them uvicorn waits for
+    # every connection and request to end, however long the clients keep it busy)
+    config = uvicorn.Config(
+        create_app(settings),
+        host="127.0.0.1",
+        port=port,
+        log_level="warning",
+        **uvicorn_options(settings),
     )
+    server = uvicorn.Server(config)
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()
     deadline = time.monotonic() + 60

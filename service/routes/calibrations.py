@@ -119,6 +119,8 @@ class ServedCalibration:
     version: int | None
     etag: str | None
     expires_at: float  # time.monotonic() after which the database is asked again
+    #: the 200 answer's headers, built once per version (the fast path sends them as they are)
+    head: tuple[tuple[bytes, bytes], ...] = ()
 
 
 def _served_document(engine: Any, spacecraft_id: str) -> tuple[int, dict[str, Any]] | None:
@@ -140,11 +142,17 @@ def _served(
         return ServedCalibration(None, None, None, expires_at)
     version, document = found
     if previous is not None and previous.version == version and previous.body is not None:
-        body, etag = previous.body, previous.etag  # same version: no new serialization
-    else:
-        body = orjson.dumps(document)
-        etag = f'"v{version}-{hashlib.sha256(body).hexdigest()[:16]}"'
-    return ServedCalibration(body, version, etag, expires_at)
+        # same version: no new serialization
+        return ServedCalibration(previous.body, version, previous.etag, expires_at, previous.head)
+    body = orjson.dumps(document)
+    etag = f'"v{version}-{hashlib.sha256(body).hexdigest()[:16]}"'
+    head = (
+        (b"etag", etag.encode("latin-1")),
+        (b"cache-control", b"no-cache"),
+        (b"content-length", str(len(body)).encode()),
+        (b"content-type", b"application/json"),
+    )
+    return ServedCalibration(body, version, etag, expires_at, head)
 
 
 def _etag_matches(if_none_match: str | None, etag: str) -> bool:
@@ -274,10 +282,15 @@ class CalibrationFastPath:
                     and self._allowed(scope, spacecraft_id)
                 ):
                     inm = next((v for k, v in scope["headers"] if k == b"if-none-match"), None)
-                    response = _calibration_response(
-                        hit, None if inm is None else inm.decode("latin-1")
+                    if inm is not None:
+                        response = _calibration_response(hit, inm.decode("latin-1"))
+                        await response(scope, receive, send)
+                        return
+                    # the answer _calibration_response gives, without building a Response
+                    await send(
+                        {"type": "http.response.start", "status": 200, "headers": list(hit.head)}
                     )
-                    await response(scope, receive, send)
+                    await send({"type": "http.response.body", "body": hit.body})
                     return
         await self.app(scope, receive, send)
 

@@ -8,7 +8,13 @@ from fastapi.testclient import TestClient
 from pydantic import SecretStr
 
 from service.app import create_app, new_state, refuse_unsafe_settings
-from service.http import HeaderCount, HttpLimits, LimitedH11Protocol, uvicorn_options
+from service.http import (
+    HeaderChecks,
+    HttpLimits,
+    LimitedH11Protocol,
+    LimitedHttpToolsProtocol,
+    uvicorn_options,
+)
 from service.settings import Settings
 from service.state import ServiceState
 
@@ -50,10 +56,15 @@ def test_unsafe_settings_are_refused_before_anything_is_built(tmp_path: Path) ->
 def test_the_server_is_given_the_limits_of_the_settings(tmp_path: Path) -> None:
     settings = _settings(tmp_path, max_header_bytes=32 * 1024, shutdown_timeout_s=2.5)
     options = uvicorn_options(settings)
-    assert options["http"] is LimitedH11Protocol
-    assert LimitedH11Protocol.limits == HttpLimits.from_settings(settings)
+    assert options["http"] is LimitedHttpToolsProtocol  # the default
+    assert LimitedHttpToolsProtocol.limits == HttpLimits.from_settings(settings)
+    h11_options = uvicorn_options(_settings(tmp_path, http_protocol="h11", max_header_bytes=2048))
+    assert h11_options["http"] is LimitedH11Protocol
+    assert LimitedH11Protocol.limits == HttpLimits.from_settings(
+        _settings(tmp_path, http_protocol="h11", max_header_bytes=2048)
+    )
     assert options["timeout_graceful_shutdown"] == 3
     assert options["h11_max_incomplete_event_size"] > 32 * 1024
     assert options["proxy_headers"] is False  # the app applies FORWARDED_ALLOW_IPS itself
     app = create_app(settings)
-    assert any(m.cls is HeaderCount for m in app.user_middleware)
+    assert any(m.cls is HeaderChecks for m in app.user_middleware)

@@ -9,6 +9,11 @@
   deadline and the upload is wholly absent.
 * ``http-disconnect``: a client that goes away mid-upload (at several points): no 5xx, no ERROR
   line in the log, nothing stored, the server well.
+* ``http-framing``: ``Transfer-Encoding`` beside ``Content-Length`` (either order, any case), two
+  different ``Content-Length`` fields: 400, nothing stored, the connection closed (a request
+  behind it on the same connection is never read).
+
+The http-* probes run once per ``ORBITCAL_HTTP_PROTOCOL`` (httptools, h11).
 * ``auth-throttle``: a valid key is never refused by the failed-authentication limit; spoofed
   ``X-Forwarded-For`` is ignored unless the proxy is trusted; behind a trusted proxy each real
   client has its own budget.
@@ -159,18 +164,34 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ServeProcess]:
         yield s
 
 
+#: ``ORBITCAL_HTTP_PROTOCOL``: every http-* probe runs against both (the first is the default).
+PROTOCOLS = ["httptools", "h11"]
+
+
+@pytest.fixture(scope="module", params=PROTOCOLS)
+def http_server(
+    request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
+) -> Iterator[ServeProcess]:
+    """The server of the http-* probes, once per HTTP protocol."""
+    env = {**EDGE_ENV, "ORBITCAL_HTTP_PROTOCOL": request.param}
+    with serve_process(tmp_path_factory.mktemp(f"probes-edge-{request.param}"), env=env) as s:
+        yield s
+
+
 # --- http-headers -----------------------------------------------------------------------------
 
 
 @pytest.mark.parametrize("mib", [1, 4, 32])
-def test_a_large_header_value_is_431_and_not_read_whole(server: ServeProcess, mib: int) -> None:
-    server.reset_peak_rss()
-    before = server.rss_mb()
+def test_a_large_header_value_is_431_and_not_read_whole(
+    http_server: ServeProcess, mib: int
+) -> None:
+    http_server.reset_peak_rss()
+    before = http_server.rss_mb()
     t0 = time.perf_counter()
-    status, answer, _sent = _send_header(_port(server), mib * MIB)
+    status, answer, _sent = _send_header(_port(http_server), mib * MIB)
     seconds = time.perf_counter() - t0
     _record(
-        server,
+        http_server,
         f"header-value-{mib}MiB",
         "http-headers",
         status,
@@ -181,26 +202,26 @@ def test_a_large_header_value_is_431_and_not_read_whole(server: ServeProcess, mi
     )
     assert status == 431, answer[:300]
     assert b"exceed" in answer
-    assert server.peak_rss_mb() - before < 30, (before, server.peak_rss_mb())
+    assert http_server.peak_rss_mb() - before < 30, (before, http_server.peak_rss_mb())
 
 
 def test_a_header_flood_on_six_connections_leaves_memory_and_other_clients_alone(
-    server: ServeProcess,
+    http_server: ServeProcess,
 ) -> None:
     """Six clients without a key send 32 MiB header values at once while a seventh polls
-    ``/healthz``: every flood is answered 431, the server's peak memory grows by < 30 MiB and
+    ``/healthz``: every flood is answered 431, the http_server's peak memory grows by < 30 MiB and
     the poll's worst latency stays under a second (issue 24: 250 MB and 5.6 s on main)."""
-    server.reset_peak_rss()
-    before = server.rss_mb()
+    http_server.reset_peak_rss()
+    before = http_server.rss_mb()
     results: list[int] = []
     latencies: list[float] = []
     done = threading.Event()
 
     def flood() -> None:
-        results.append(_send_header(_port(server), 32 * MIB)[0])
+        results.append(_send_header(_port(http_server), 32 * MIB)[0])
 
     def poll() -> None:
-        with httpx.Client(base_url=server.url, timeout=30) as http:
+        with httpx.Client(base_url=http_server.url, timeout=30) as http:
             while not done.is_set():
                 t0 = time.perf_counter()
                 assert http.get("/healthz").status_code == 200
@@ -221,9 +242,9 @@ def test_a_header_flood_on_six_connections_leaves_memory_and_other_clients_alone
     done.set()
     poller.join(30)
     seconds = time.perf_counter() - t0
-    growth = server.peak_rss_mb() - before
+    growth = http_server.peak_rss_mb() - before
     _record(
-        server,
+        http_server,
         "header-flood-6x32MiB",
         "http-headers",
         max(results),
@@ -253,17 +274,17 @@ def test_a_header_flood_on_six_connections_leaves_memory_and_other_clients_alone
     ],
 )
 def test_header_blocks(
-    server: ServeProcess, name: str, fields: list[tuple[str, str]], status: int
+    http_server: ServeProcess, name: str, fields: list[tuple[str, str]], status: int
 ) -> None:
     head = "".join(f"{k}: {v}\r\n" for k, v in fields)
     raw = f"GET /v1/spacecraft HTTP/1.1\r\nHost: x\r\nX-API-Key: {ADMIN_KEY}\r\n{head}\r\n"
     t0 = time.perf_counter()
-    with socket.create_connection(("127.0.0.1", _port(server)), timeout=30) as s:
+    with socket.create_connection(("127.0.0.1", _port(http_server)), timeout=30) as s:
         with contextlib.suppress(BrokenPipeError, ConnectionResetError):
             s.sendall(raw.encode())
         answer = _read_answer(s, 30)
     _record(
-        server,
+        http_server,
         f"header-block-{name}",
         "http-headers",
         _status_of(answer),
@@ -277,13 +298,13 @@ def test_header_blocks(
 # --- http-timeouts ----------------------------------------------------------------------------
 
 
-def test_a_connection_that_sends_nothing_is_closed(server: ServeProcess) -> None:
+def test_a_connection_that_sends_nothing_is_closed(http_server: ServeProcess) -> None:
     t0 = time.perf_counter()
-    with socket.create_connection(("127.0.0.1", _port(server)), timeout=30) as s:
-        answer = _read_answer(s, 20)  # returns when the server closes
+    with socket.create_connection(("127.0.0.1", _port(http_server)), timeout=30) as s:
+        answer = _read_answer(s, 20)  # returns when the http_server closes
     seconds = time.perf_counter() - t0
     _record(
-        server,
+        http_server,
         "half-open-silent",
         "http-timeouts",
         _status_of(answer) if answer else 0,
@@ -293,20 +314,24 @@ def test_a_connection_that_sends_nothing_is_closed(server: ServeProcess) -> None
     assert answer == b"" and 1.5 < seconds < 10, (answer, seconds)
 
 
-def test_headers_that_stop_half_way_are_408(server: ServeProcess) -> None:
+def test_headers_that_stop_half_way_are_408(http_server: ServeProcess) -> None:
     t0 = time.perf_counter()
-    with socket.create_connection(("127.0.0.1", _port(server)), timeout=30) as s:
+    with socket.create_connection(("127.0.0.1", _port(http_server)), timeout=30) as s:
         s.sendall(b"GET /v1/spacecraft HTTP/1.1\r\nHost: x\r\nX-Api")
         answer = _read_answer(s, 20)
     seconds = time.perf_counter() - t0
-    _record(server, "half-headers", "http-timeouts", _status_of(answer), answer.decode(), seconds)
+    _record(
+        http_server, "half-headers", "http-timeouts", _status_of(answer), answer.decode(), seconds
+    )
     assert _status_of(answer) == 408 and 1.5 < seconds < 10, (answer, seconds)
 
 
-def test_headers_trickled_a_byte_at_a_time_are_cut_at_the_deadline(server: ServeProcess) -> None:
+def test_headers_trickled_a_byte_at_a_time_are_cut_at_the_deadline(
+    http_server: ServeProcess,
+) -> None:
     """The header timeout counts from the first byte: a slowloris cannot reset it."""
     t0 = time.perf_counter()
-    with socket.create_connection(("127.0.0.1", _port(server)), timeout=30) as s:
+    with socket.create_connection(("127.0.0.1", _port(http_server)), timeout=30) as s:
         answer = b""
         try:
             for byte in b"GET /v1/spacecraft HTTP/1.1\r\nHost: x\r\n" + b"X-Slow: " + b"a" * 100:
@@ -319,7 +344,7 @@ def test_headers_trickled_a_byte_at_a_time_are_cut_at_the_deadline(server: Serve
         answer = _read_answer(s, 10)
     seconds = time.perf_counter() - t0
     _record(
-        server,
+        http_server,
         "slowloris-headers",
         "http-timeouts",
         _status_of(answer),
@@ -341,12 +366,12 @@ def _upload_head(sc: str, length: int) -> bytes:
     [("body-pauses", 3.0, 1), ("body-trickles-past-deadline", 0.5, 40)],
 )
 def test_a_slow_body_is_408_and_nothing_is_stored(
-    server: ServeProcess, name: str, pause_s: float, pieces: int
+    http_server: ServeProcess, name: str, pause_s: float, pieces: int
 ) -> None:
-    sc = server.new_spacecraft()
+    sc = http_server.new_spacecraft()
     body = csv_batch(T0_UTC_S, 50)
     t0 = time.perf_counter()
-    with socket.create_connection(("127.0.0.1", _port(server)), timeout=30) as s:
+    with socket.create_connection(("127.0.0.1", _port(http_server)), timeout=30) as s:
         s.sendall(_upload_head(sc, len(body)) + body[:100])
         try:
             for i in range(pieces):
@@ -358,9 +383,9 @@ def test_a_slow_body_is_408_and_nothing_is_stored(
             pass
         answer = _read_answer(s, 20)
     seconds = time.perf_counter() - t0
-    stored = server.stored_count(sc)
+    stored = http_server.stored_count(sc)
     _record(
-        server,
+        http_server,
         name,
         "http-timeouts",
         _status_of(answer),
@@ -379,19 +404,21 @@ def test_a_slow_body_is_408_and_nothing_is_stored(
 
 
 @pytest.mark.parametrize("sent_fraction", [0.0, 0.3, 0.99])
-def test_a_client_gone_mid_upload_is_no_error(server: ServeProcess, sent_fraction: float) -> None:
-    sc = server.new_spacecraft()
+def test_a_client_gone_mid_upload_is_no_error(
+    http_server: ServeProcess, sent_fraction: float
+) -> None:
+    sc = http_server.new_spacecraft()
     body = csv_batch(T0_UTC_S, 2000)
-    log_before = len(server.log_text())
+    log_before = len(http_server.log_text())
     t0 = time.perf_counter()
-    with socket.create_connection(("127.0.0.1", _port(server)), timeout=30) as s:
+    with socket.create_connection(("127.0.0.1", _port(http_server)), timeout=30) as s:
         s.sendall(_upload_head(sc, len(body)) + body[: int(len(body) * sent_fraction)])
         time.sleep(0.3)
     time.sleep(0.5)
-    log = server.log_text()[log_before:]
-    stored = server.stored_count(sc)
+    log = http_server.log_text()[log_before:]
+    stored = http_server.stored_count(sc)
     _record(
-        server,
+        http_server,
         f"disconnect-at-{sent_fraction:g}",
         "http-disconnect",
         0,
@@ -399,9 +426,67 @@ def test_a_client_gone_mid_upload_is_no_error(server: ServeProcess, sent_fractio
         time.perf_counter() - t0,
         stored=stored,
     )
-    assert server.alive() and server.healthy()
+    assert http_server.alive() and http_server.healthy()
     assert stored == 0
     assert "ERROR" not in log and "Traceback" not in log and '"status": 5' not in log, log[-2000:]
+
+
+# --- http-framing -----------------------------------------------------------------------------
+
+#: Framing headers whose body length two parsers (a proxy and this server) could read apart
+#: (RFC 9112 §6.3); the body is valid CSV (chunked beside Transfer-Encoding), so a server framing
+#: it by either header would store rows.
+AMBIGUOUS_FRAMINGS = {
+    "te-then-cl": "Transfer-Encoding: chunked\r\nContent-Length: {n}\r\n",
+    "cl-then-te": "Content-Length: {n}\r\nTransfer-Encoding: chunked\r\n",
+    "te-upper-case-and-cl": "Transfer-Encoding: CHUNKED\r\nContent-Length: {n}\r\n",
+    "two-different-cl": "Content-Length: {n}\r\nContent-Length: {m}\r\n",
+}
+
+
+def _chunked(body: bytes) -> bytes:
+    return b"%x\r\n%s\r\n0\r\n\r\n" % (len(body), body)
+
+
+@pytest.mark.parametrize("name", sorted(AMBIGUOUS_FRAMINGS))
+def test_an_ambiguous_body_framing_is_400_nothing_stored_and_the_connection_closed(
+    http_server: ServeProcess, name: str
+) -> None:
+    """A request smuggled behind the ambiguous one on the same connection is never read."""
+    sc = http_server.new_spacecraft()
+    body = csv_batch(T0_UTC_S, 20)
+    framing = AMBIGUOUS_FRAMINGS[name].format(n=len(body), m=len(body) - 7)
+    sent = _chunked(body) if "te" in name.split("-") else body
+    head = (
+        f"POST /v1/spacecraft/{sc}/telemetry HTTP/1.1\r\nHost: x\r\nX-API-Key: {ADMIN_KEY}\r\n"
+        f"Content-Type: text/csv\r\n{framing}\r\n"
+    ).encode()
+    other = csv_batch(T0_UTC_S + 86400, 10)
+    smuggled = _upload_head(sc, len(other)) + other
+    t0 = time.perf_counter()
+    with socket.create_connection(("127.0.0.1", _port(http_server)), timeout=30) as s:
+        with contextlib.suppress(BrokenPipeError, ConnectionResetError):
+            s.sendall(head + sent + smuggled)
+        answer = _read_answer(s, 10)
+        s.settimeout(10)
+        try:
+            rest = s.recv(65536)  # b"": the server closed the connection after its answer
+        except ConnectionResetError:
+            rest = b""
+    stored = http_server.stored_count(sc)
+    _record(
+        http_server,
+        f"framing-{name}",
+        "http-framing",
+        _status_of(answer),
+        answer.decode("latin1"),
+        time.perf_counter() - t0,
+        stored=stored,
+        body_bytes=len(body),
+    )
+    assert _status_of(answer) == 400, answer[:300]
+    assert answer.count(b"HTTP/1.1 ") == 1 and rest == b"", (answer, rest)
+    assert stored == 0  # neither the ambiguous upload nor the one smuggled behind it
 
 
 # --- orbit-document ---------------------------------------------------------------------------
@@ -792,10 +877,16 @@ def test_behind_a_trusted_proxy_each_client_has_its_own_budget(tmp_path: Path) -
 # --- http-shutdown ----------------------------------------------------------------------------
 
 
+@pytest.mark.parametrize("protocol", PROTOCOLS)
 def test_sigterm_stops_the_server_within_the_deadline_while_a_client_trickles(
-    tmp_path: Path,
+    tmp_path: Path, protocol: str
 ) -> None:
-    env = {**EDGE_ENV, "ORBITCAL_BODY_IDLE_TIMEOUT_S": "30", "ORBITCAL_BODY_TIMEOUT_S": "600"}
+    env = {
+        **EDGE_ENV,
+        "ORBITCAL_BODY_IDLE_TIMEOUT_S": "30",
+        "ORBITCAL_BODY_TIMEOUT_S": "600",
+        "ORBITCAL_HTTP_PROTOCOL": protocol,
+    }
     with serve_process(tmp_path, env=env) as s:
         sc = s.new_spacecraft()
         body = csv_batch(T0_UTC_S, 200)
