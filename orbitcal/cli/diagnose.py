@@ -112,10 +112,12 @@ def run(args: argparse.Namespace) -> int:
     Path(args.out).write_text(report.to_json_text(indent=1) + "\n")
     if args.html:
         Path(args.html).write_text(report_html(report.to_json()))
+    split = options.attribution
     print(
         f"verdict: {report.verdict}; held-out RMS {report.baseline_holdout_rms_nt} nT "
-        f"-> {report.final_holdout_rms_nt} nT; report written to {args.out}"
-        + (f", HTML page to {args.html}" if args.html else "")
+        f"-> {report.final_holdout_rms_nt} nT (the diagnosis's own split: the last "
+        f"{split.holdout_blocks} of {split.n_blocks} time blocks, not calibrate's hold-out); "
+        f"report written to {args.out}" + (f", HTML page to {args.html}" if args.html else "")
     )
     _print_first_screen(report.to_json())
     return 0
