@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import socket
 import struct
+import time
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +22,7 @@ import numpy as np
 import pytest
 from yamcs_real import (
     METHODS,
+    VALUE_TIMEOUT_S,
     YamcsServer,
     eng,
     export_options,
@@ -126,26 +128,64 @@ def _replay(
             cal, lin = _outputs(method, names, calibration_form(documents[method]).hk_names)
             outputs += cal + lin
         any_hk = next(f.x_hk for f in feeder.fitted.values() if f.x_hk is not None)
-        feeder.hk(cells, any_hk[row])
-        expected = feeder.raw(cells, feeder.fitted[METHODS[0]].telemetry.b_raw_nt[row], stamp)
-        got = {}
-        for name, value in expected.items():
-            mine = [o for o in outputs if _feeds(name, o)]
-            got.update(feeder.proc.wait_for({name: value}, [], mine))
+        wanted: dict[str, float] = {}
         for method, names in cells:
             form = calibration_form(documents[method])
             f = feeder.fitted[method]
             b = f.telemetry.b_raw_nt[row].copy()
             b[0] += stamp
             x = None if f.x_hk is None else f.x_hk[row : row + 1]
-            want = evaluate_form(form, b[None, :], x)[0]
-            want_lin = evaluate_form(affine_part(form), b[None, :], x)[0]
             cal, lin = _outputs(method, names, form.hk_names)
-            have = np.array([eng(got[c]) for c in cal])
-            have_lin = np.array([eng(got[c]) for c in lin])
-            worst[(method, names)][0] = max(worst[(method, names)][0], *np.abs(have - want))
-            worst[(method, names)][1] = max(worst[(method, names)][1], *np.abs(have_lin - want_lin))
+            wanted.update(zip(cal, evaluate_form(form, b[None, :], x)[0], strict=True))
+            wanted.update(zip(lin, evaluate_form(affine_part(form), b[None, :], x)[0], strict=True))
+        for attempt in range(2):
+            feeder.hk(cells, any_hk[row])
+            expected = feeder.raw(cells, feeder.fitted[METHODS[0]].telemetry.b_raw_nt[row], stamp)
+            got: dict[str, dict[str, Any]] = {}
+            for name, value in expected.items():
+                mine = [o for o in outputs if _feeds(name, o)]
+                got.update(feeder.proc.wait_for({name: value}, [], mine))
+            got = _settled(feeder, got, wanted, SETTLE_S if attempt == 0 else VALUE_TIMEOUT_S)
+            stale = [n for n, v in wanted.items() if not abs(_value(got, n) - v) < YAMCS_NT]
+            if not stale:
+                break
+            RESENT.append((i, stale))  # known: see _settled
+        for method, names in cells:
+            cal, lin = _outputs(method, names, calibration_form(documents[method]).hk_names)
+            d_cal = max(abs(_value(got, c) - wanted[c]) for c in cal)
+            d_lin = max(abs(_value(got, c) - wanted[c]) for c in lin)
+            worst[(method, names)][0] = max(worst[(method, names)][0], d_cal)
+            worst[(method, names)][1] = max(worst[(method, names)][1], d_lin)
     return {c: (w[0], w[1]) for c, w in worst.items()}
+
+
+#: Rows whose outputs had to be set a second time, and which outputs had kept the previous
+#: row's value: a known defect (docs/yamcs.md, "Known limits"). Yamcs runs an algorithm on each
+#: input's update; with the raw axes set over REST as separate local parameters, about one run
+#: in three leaves one output (a *_CAL or *_CAL_LIN of one axis) at the previous row's value
+#: until its inputs are updated again. The row is set once more; a second miss fails the test.
+RESENT: list[tuple[int, list[str]]] = []
+SETTLE_S = 5.0
+
+
+def _value(got: dict[str, dict[str, Any]], name: str) -> float:
+    value = eng(got.get(name))
+    return float("nan") if value is None else float(value)
+
+
+def _settled(
+    feeder: Feeder, got: dict[str, dict[str, Any]], wanted: dict[str, float], timeout_s: float
+) -> dict[str, dict[str, Any]]:
+    """The outputs once the row's inputs have reached every algorithm: polled until every output
+    holds the row's value or ``timeout_s`` passes (a value that never comes is returned as it
+    is, and the comparison then fails)."""
+    deadline = time.monotonic() + timeout_s
+    while any(not abs(_value(got, n) - v) < YAMCS_NT for n, v in wanted.items()):
+        if time.monotonic() > deadline:
+            break
+        time.sleep(0.02)
+        got = {**got, **feeder.proc.get(list(wanted))}
+    return got
 
 
 def _feeds(raw_name: str, output: str) -> bool:
