@@ -101,12 +101,12 @@ def whiten_with(
 ) -> tuple[FloatArray, np.ndarray]:
     """``sum_j a_j x[t - j] / sigma`` (rows whose history leaves their run are zero and invalid)."""
     x = np.asarray(x, dtype=float)
-    out = a[0] * x.copy()
     lag = a.size - 1
-    for j in range(1, lag + 1):
-        out[j:] += a[j] * x[:-j]
     t = np.arange(x.shape[0])
     valid = (t - np.asarray(run_start)) >= lag
+    out = a[0] * x
+    for j in range(1, lag + 1):
+        out[j:] += a[j] * x[:-j]
     out[~valid] = 0.0
     out /= sigma
     return out, valid
