@@ -14,7 +14,7 @@ from test_diagnose_worlds import make_world
 
 from orbitcal.diagnose.attribution.engine import training_split
 from orbitcal.diagnose.model import candidate_forms, model_diagnosis
-from orbitcal.diagnose.model.confirm import newey_west_variance
+from orbitcal.diagnose.model.confirm import andrews_bandwidth, newey_west_variance
 from orbitcal.diagnose.model.evidence import augment, log_evidence, posterior, project
 from orbitcal.diagnose.model.gram import Form, Gram
 from orbitcal.diagnose.model.noise_model import fit_axis_noise, runs_of_index
@@ -110,6 +110,25 @@ def test_posterior_probabilities_sum_to_one_over_every_model() -> None:
     assert inc["a"] > 0.9  # the injected column
     for a, b in itertools.combinations("abc", 2):
         assert post.pair(a, b) <= min(inc[a], inc[b]) + 1e-12
+
+
+def test_noise_model_takes_one_over_f_noise_as_long_memory() -> None:
+    # a 1/f spectrum (the benchmark's pink noise): no AR(<=4) or local level whitens it
+    rng = np.random.default_rng(5)
+    n = 20_000
+    spec = rng.normal(size=n // 2 + 1) + 1j * rng.normal(size=n // 2 + 1)
+    f = np.fft.rfftfreq(n)
+    f[0] = f[1]
+    pink = np.fft.irfft(spec / np.sqrt(f), n)
+    nz = fit_axis_noise(pink / np.std(pink), runs_of_index(np.arange(n)), max_order=4)
+    assert nz.kind == "frac" and nz.phi[0] >= 0.3
+
+
+def test_andrews_bandwidth_grows_with_the_autocorrelation() -> None:
+    rng = np.random.default_rng(6)
+    white = andrews_bandwidth(rng.normal(size=2_000))
+    persistent = andrews_bandwidth(_ar1(2_000, 0.8, rng))
+    assert white <= 2 and persistent > 5 * max(white, 1)
 
 
 def test_newey_west_variance_of_white_noise_is_its_variance() -> None:

@@ -8,7 +8,8 @@ models,
     d_t = sum_axes [ w_base^2 - (w_model^2 - (w_base - w_model)^2) ],
 
 whose mean is tested one-sided (H1: the model forecasts better) with a Newey & West (1987)
-variance (Bartlett kernel, bandwidth ``floor(4 (T / 100)^(2/9))``) so that what autocorrelation
+variance (Bartlett kernel, bandwidth by Andrews' (1991) AR(1) plug-in rule on ``d`` itself, so
+that it lengthens with what persistence whitening leaves) so that what autocorrelation
 whitening leaves does not make the test liberal (Diebold & Mariano 1995). The block's RMS before
 and after are the contract's ``holdout_rms_*_nt`` (per component).
 """
@@ -24,7 +25,7 @@ import numpy as np
 from orbitcal.arrays import FloatArray
 from orbitcal.diagnose.model.noise_model import AxisNoise
 
-__all__ = ["Confirmation", "confirm", "newey_west_variance"]
+__all__ = ["Confirmation", "andrews_bandwidth", "confirm", "newey_west_variance"]
 
 
 @dataclass(frozen=True)
@@ -60,11 +61,27 @@ class Confirmation:
         }
 
 
-def newey_west_variance(d: FloatArray, bandwidth: int | None = None) -> float:
-    """Long-run variance of the series ``d`` (Bartlett weights); bandwidth by the usual rule."""
+def andrews_bandwidth(d: FloatArray) -> int:
+    """Andrews' (1991) bandwidth of the Bartlett kernel for the series ``d``, its AR(1)
+    plug-in: ``1.1447 (alpha T)^(1/3)``, ``alpha = 4 rho^2 / ((1 - rho)^2 (1 + rho)^2)``."""
     d = np.asarray(d, dtype=float) - float(np.mean(d))
     t = d.size
-    lags = int(4 * (t / 100.0) ** (2.0 / 9.0)) if bandwidth is None else bandwidth
+    den = float(d[:-1] @ d[:-1])
+    rho = float(d[1:] @ d[:-1]) / den if den > 0.0 else 0.0
+    rho = min(max(rho, -ANDREWS_MAX_RHO), ANDREWS_MAX_RHO)
+    alpha = 4.0 * rho**2 / ((1.0 - rho) ** 2 * (1.0 + rho) ** 2)
+    return int(min(1.1447 * (alpha * t) ** (1.0 / 3.0), t - 1))
+
+
+#: The AR(1) coefficient of :func:`andrews_bandwidth` is clipped to this (Andrews 1991 sec. 6).
+ANDREWS_MAX_RHO = 0.97
+
+
+def newey_west_variance(d: FloatArray, bandwidth: int | None = None) -> float:
+    """Long-run variance of the series ``d`` (Bartlett weights); bandwidth by Andrews' rule."""
+    d = np.asarray(d, dtype=float) - float(np.mean(d))
+    t = d.size
+    lags = andrews_bandwidth(d) if bandwidth is None else bandwidth
     var = float(d @ d) / t
     for k in range(1, min(lags, t - 1) + 1):
         var += 2.0 * (1.0 - k / (lags + 1.0)) * float(d[k:] @ d[:-k]) / t

@@ -205,6 +205,11 @@ def _noise_candidates(
     return out, beta_ls
 
 
+def _augmented(gram: Gram, cal_mean: FloatArray) -> Augmented:
+    """The Gram matrix with the calibration's prior (:data:`CAL_PRIOR_SD_NT`)."""
+    return augment(gram, cal_mean, np.full(12, CAL_PRIOR_SD_NT), gram.log_scale)
+
+
 def _best_forms(aug: Augmented, forms: Sequence[Form]) -> list[Form]:
     """Per effect, the form of greatest evidence alone (its choice paid for by ``n_forms``)."""
     best: dict[str, tuple[float, Form]] = {}
@@ -248,10 +253,11 @@ def _under(
     noise: tuple[AxisNoise, ...],
     cal_mean: FloatArray,
     options: ModelOptions,
+    best: list[Form],
 ) -> _Fitted:
-    """The posterior under one noise model, from its Gram matrix."""
-    aug = augment(gram, cal_mean, np.full(12, CAL_PRIOR_SD_NT), gram.log_scale)
-    best = _best_forms(aug, forms)
+    """The posterior under one noise model of its effects' ``best`` forms, from its Gram
+    matrix (over ``forms``)."""
+    aug = _augmented(gram, cal_mean)
     post = posterior(
         aug,
         best,
@@ -283,8 +289,19 @@ def model_diagnosis(
     starts = run_starts(data, index, step)
     noises, cal_mean = _noise_candidates(data, index, starts, forms, options.noise_max_order)
     skip = noise_skip(options.noise_max_order)
+    # each effect's form chosen under each noise model from the forms' own products, then the
+    # whole Gram matrix of the chosen forms alone (the products between forms of one effect,
+    # never in one model, are not made)
+    apart = whitened_grams(data, index, starts, forms, noises, skip=skip, forms_apart=True)
+    bests = [_best_forms(_augmented(g, cal_mean), forms) for g in apart]
+    used = [f for f in forms if any(f is b for best in bests for b in best)]
+    forms = _compact(used)
+    bests = [[forms[next(j for j, u in enumerate(used) if u is b)] for b in best] for best in bests]
     grams = whitened_grams(data, index, starts, forms, noises, skip=skip)
-    fits = [_under(forms, g, n, cal_mean, options) for g, n in zip(grams, noises, strict=True)]
+    fits = [
+        _under(forms, g, n, cal_mean, options, best)
+        for g, n, best in zip(grams, noises, bests, strict=True)
+    ]
     post, weights = averaged([f.post for f in fits])
     fit = fits[int(np.argmax(weights))]
     chosen = post.median_model(options.selection_probability)

@@ -23,7 +23,7 @@ from orbitcal.arrays import FloatArray
 from orbitcal.diagnose.data import FIELD_SCALE_NT, DiagnosisData
 from orbitcal.diagnose.design import DesignBlock
 from orbitcal.diagnose.effects import block_ranges
-from orbitcal.diagnose.model.noise_model import AxisNoise
+from orbitcal.diagnose.model.noise_model import AxisNoise, whiten_with
 
 __all__ = [
     "CHUNK_SAMPLES",
@@ -153,6 +153,26 @@ def whitened_gram(
     return whitened_grams(data, index, run_start, forms, [noise], skip)[0]
 
 
+FilterGroups = list[list[tuple[FloatArray, list[int]]]]
+
+
+def _filter_groups(noises: Sequence[Sequence[AxisNoise]]) -> FilterGroups:
+    """Per axis, the distinct whitening filters among the noise models and which models use each
+    (models sharing a filter share one pass; their Gram matrices differ by ``1 / sigma^2``)."""
+    out: FilterGroups = []
+    for i in range(3):
+        groups: list[tuple[FloatArray, list[int]]] = []
+        for k, noise in enumerate(noises):
+            a = noise[i].filter
+            same = [g for g in groups if np.array_equal(g[0], a)]
+            if same:
+                same[0][1].append(k)
+            else:
+                groups.append((a, [k]))
+        out.append(groups)
+    return out
+
+
 def whitened_grams(
     data: DiagnosisData,
     index: IntArray,
@@ -160,12 +180,17 @@ def whitened_grams(
     forms: Sequence[Form],
     noises: Sequence[Sequence[AxisNoise]],
     skip: int = 0,
+    forms_apart: bool = False,
 ) -> list[Gram]:
-    """:func:`whitened_gram` under each of several noise models, the rows built once."""
+    """:func:`whitened_gram` under each of several noise models, the rows built once and each
+    axis's rows filtered once per distinct filter (the innovations' ``1 / sigma^2`` applied to
+    the sums). With ``forms_apart`` the products between two forms are left zero (each form
+    alone against the calibration and the data: what choosing among an effect's forms reads,
+    at a fraction of the products)."""
     width = max((f.cols.stop for f in forms), default=0)
-    fulls = [np.zeros((12 + width + 1, 12 + width + 1)) for _ in noises]
-    n_rows = [0] * len(noises)
-    log_scale = [0.0] * len(noises)
+    groups = _filter_groups(noises)
+    sums = [[np.zeros((4 + width + 1, 4 + width + 1)) for _ in g] for g in groups]
+    counts = [[0] * len(g) for g in groups]
     lag = max(skip, *(n.lag for noise in noises for n in noise))
     for lo, a, b in _chunks(index.size, lag):
         part = index[lo:b]
@@ -173,33 +198,64 @@ def whitened_grams(
         y = data.b_raw_nt[part]
         # run starts before the chunk are negative: the kept rows' history is inside it
         starts = run_start[lo:b] - lo
-        keep = slice(a - lo, b - lo)
+        kept = np.zeros(part.size, dtype=bool)
+        kept[a - lo : b - lo] = True
+        kept &= (np.arange(part.size) - starts) >= skip
         for i in range(3):
             z = np.concatenate([cal, eff[:, i, :], y[:, i : i + 1]], axis=1)
-            ix = np.r_[4 * i : 4 * i + 4, 12 : 12 + width + 1]
-            for k, noise in enumerate(noises):
-                w, valid = noise[i].whiten(z, starts)
-                valid &= (np.arange(part.size) - starts) >= skip
-                w = w[keep][valid[keep]]
-                n_rows[k] += w.shape[0]
-                log_scale[k] += w.shape[0] * float(np.log(noise[i].sigma_nt))
-                # the upper triangle of w'w (a rank-k update: half the products of w.T @ w)
-                fulls[k][np.ix_(ix, ix)] += dsyrk(1.0, w.T)
-    fulls = [np.triu(f) + np.triu(f, 1).T for f in fulls]
+            for g, (filt, _) in enumerate(groups[i]):
+                if filt.size == 1:  # white (a_0 = 1): no filtering
+                    w = z[kept]
+                else:
+                    w, valid = whiten_with(filt, 1.0, z, starts)
+                    w = w[valid & kept]
+                counts[i][g] += w.shape[0]
+                if forms_apart:
+                    _add_apart(sums[i][g], w, forms)
+                else:  # the upper triangle of w'w (a rank-k update: half of w.T @ w)
+                    sums[i][g] += dsyrk(1.0, w.T)
+    return [_assembled(groups, sums, counts, noise, k, width) for k, noise in enumerate(noises)]
+
+
+def _add_apart(out: FloatArray, w: FloatArray, forms: Sequence[Form]) -> None:
+    """The upper triangle of ``w'w`` (columns: 4 calibration, the forms', the data) without the
+    products between two forms."""
+    out[:4, :] += w[:, :4].T @ w
+    out[4:, -1] += w[:, 4:].T @ w[:, -1]
+    for f in forms:
+        c = slice(4 + f.cols.start, 4 + f.cols.stop)
+        out[c, c] += w[:, c].T @ w[:, c]
+
+
+def _assembled(
+    groups: FilterGroups,
+    sums: list[list[FloatArray]],
+    counts: list[list[int]],
+    noise: Sequence[AxisNoise],
+    k: int,
+    width: int,
+) -> Gram:
+    """Noise model ``k``'s Gram matrix from the per-axis sums of its filters."""
+    full = np.zeros((12 + width + 1, 12 + width + 1))
+    n_rows, log_scale = 0, 0.0
+    for i in range(3):
+        g = next(j for j, (_, ks) in enumerate(groups[i]) if k in ks)
+        ix = np.r_[4 * i : 4 * i + 4, 12 : 12 + width + 1]
+        full[np.ix_(ix, ix)] += sums[i][g] / noise[i].sigma_nt ** 2
+        n_rows += counts[i][g]
+        log_scale += counts[i][g] * float(np.log(noise[i].sigma_nt))
+    full = np.triu(full) + np.triu(full, 1).T
     c, e = slice(0, 12), slice(12, 12 + width)
-    return [
-        Gram(
-            cc=full[c, c],
-            ce=full[c, e],
-            cy=full[c, -1],
-            ee=full[e, e],
-            ey=full[e, -1],
-            yy=float(full[-1, -1]),
-            n_rows=n,
-            log_scale=ls,
-        )
-        for full, n, ls in zip(fulls, n_rows, log_scale, strict=True)
-    ]
+    return Gram(
+        cc=full[c, c],
+        ce=full[c, e],
+        cy=full[c, -1],
+        ee=full[e, e],
+        ey=full[e, -1],
+        yy=float(full[-1, -1]),
+        n_rows=n_rows,
+        log_scale=log_scale,
+    )
 
 
 def apply_model(

@@ -8,6 +8,8 @@ The candidates for one axis's residual ``r_t`` (samples in contiguous runs) are
 * a local level (white noise plus a random-walk offset, ARIMA(0, 1, 1)): the differences an MA(1)
   of coefficient ``theta`` on a grid (:data:`LEVEL_THETAS`), whitened by ``(1 - L) / (1 + theta L)``
   truncated after :data:`LEVEL_TAPS` taps,
+* long memory (a 1/f-like spectrum): ``(1 - L)^d r_t`` an AR(1), ``d`` on a grid
+  (:data:`FRAC_DS`), the fractional difference truncated to the local level's history,
 
 each fitted by conditional least squares on the same samples (every run's first
 :func:`noise_skip` dropped, so that the likelihoods compare) and scored by
@@ -37,10 +39,12 @@ class AxisNoise:
 
     Attributes
     ----------
-    kind : {"ar", "rw"}
-        Autoregressive, or a random-walk offset (differences autoregressive).
+    kind : {"ar", "rw", "level", "frac"}
+        Autoregressive, a random-walk offset (differences autoregressive), a local level, or
+        long memory (fractional differences autoregressive).
     phi : ndarray, shape (p,)
-        Autoregressive coefficients (of the differences for ``"rw"``).
+        Autoregressive coefficients (of the differences for ``"rw"``); ``[theta]`` for
+        ``"level"``; ``[d, phi_1]`` for ``"frac"``.
     sigma_nt : float
         Standard deviation of the innovations [nT].
     bic : float
@@ -57,6 +61,8 @@ class AxisNoise:
         """The whitening filter's coefficients ``a_0 = 1, a_1, ...`` (``e_t = sum a_j r_(t-j)``)."""
         if self.kind == "level":
             return level_filter(float(self.phi[0]))
+        if self.kind == "frac":
+            return np.convolve(frac_filter(float(self.phi[0])), [1.0, -float(self.phi[1])])
         a = np.r_[1.0, -np.asarray(self.phi, dtype=float)]
         return np.convolve(a, [1.0, -1.0]) if self.kind == "rw" else a
 
@@ -71,6 +77,11 @@ class AxisNoise:
             return (
                 f"white noise + random-walk offset (ARIMA(0,1,1), theta {float(self.phi[0]):.3f}), "
                 f"innovations sigma {self.sigma_nt:.4g} nT"
+            )
+        if self.kind == "frac":
+            return (
+                f"long memory (fractional difference d {float(self.phi[0]):.2f}) + AR(1) "
+                f"{float(self.phi[1]):.3f}, innovations sigma {self.sigma_nt:.4g} nT"
             )
         head = "random-walk offset + " if self.kind == "rw" else ""
         return f"{head}AR({self.phi.size}), innovations sigma {self.sigma_nt:.4g} nT"
@@ -96,17 +107,29 @@ def level_filter(theta: float) -> FloatArray:
     return np.convolve([1.0, -1.0], inv)
 
 
+#: The fractional differences ``d`` tried for long-memory noise (``d = 0.5``: a 1/f spectrum;
+#: Granger & Joyeux 1980, Hosking 1981), each with an AR(1) on top.
+FRAC_DS = (0.1, 0.2, 0.3, 0.4, 0.5)
+
+
+def frac_filter(d: float) -> FloatArray:
+    """``(1 - L)^d`` truncated after ``LEVEL_TAPS - 1`` taps (with the AR(1) on top, the filter's
+    history is the local level's, so every noise model is scored on the same samples)."""
+    k = np.arange(1, LEVEL_TAPS - 1)
+    return np.r_[1.0, np.cumprod((k - 1.0 - d) / k)]
+
+
 def whiten_with(
     a: FloatArray, sigma: float, x: FloatArray, run_start: IntArray
 ) -> tuple[FloatArray, np.ndarray]:
     """``sum_j a_j x[t - j] / sigma`` (rows whose history leaves their run are zero and invalid)."""
     x = np.asarray(x, dtype=float)
-    out = a[0] * x.copy()
     lag = a.size - 1
-    for j in range(1, lag + 1):
-        out[j:] += a[j] * x[:-j]
     t = np.arange(x.shape[0])
     valid = (t - np.asarray(run_start)) >= lag
+    out = a[0] * x
+    for j in range(1, lag + 1):
+        out[j:] += a[j] * x[:-j]
     out[~valid] = 0.0
     out /= sigma
     return out, valid
@@ -153,6 +176,9 @@ def fit_axis_noise(r_nt: FloatArray, run_start: IntArray, *, max_order: int) -> 
     skip = noise_skip(max_order)
     d = np.r_[0.0, np.diff(r)]
     best = _best_level(r, run_start, skip)
+    frac = _best_frac(r, run_start, skip)
+    if frac is not None and (best is None or frac.bic < best.bic):
+        best = frac
     for kind, series, orders in (
         ("ar", r, range(max_order + 1)),
         ("rw", d, range(max_order)),
@@ -192,6 +218,21 @@ def _best_level(r: FloatArray, run_start: IntArray, skip: int) -> AxisNoise | No
         bic = n * float(np.log(var)) + 2 * float(np.log(n))
         if best is None or bic < best.bic:
             best = AxisNoise("level", np.array([theta]), float(np.sqrt(var)), bic)
+    return best
+
+
+def _best_frac(r: FloatArray, run_start: IntArray, skip: int) -> AxisNoise | None:
+    """The long-memory model (``(1 - L)^d`` then an AR(1)) of least BIC over :data:`FRAC_DS`
+    (three parameters and the variance)."""
+    best: AxisNoise | None = None
+    for d in FRAC_DS:
+        e, _ = whiten_with(frac_filter(d), 1.0, r, run_start)
+        phi, var, n = _candidate(e, run_start, 1, skip)
+        if n < 4 or var <= 0.0:
+            continue
+        bic = n * float(np.log(var)) + 3 * float(np.log(n))
+        if best is None or bic < best.bic:
+            best = AxisNoise("frac", np.array([d, float(phi[0])]), float(np.sqrt(var)), bic)
     return best
 
 
