@@ -163,7 +163,8 @@ def test_report_has_the_contract_keys_and_html_renders() -> None:
     assert report["learned"]["legendre_order"] == 3 and report["learned"]["hidden_nodes"] == 6
     page = report_html(report)  # drawn from the JSON alone
     assert page.count('<svg class="plot"') >= 4
-    assert "90 % interval" in page and "confidence" in page
+    # the size with its 90 % interval, and the verdict's probability (never a "confidence")
+    assert "90 %" in page and "Probability" in page
 
 
 def test_cli_diagnose_end_to_end(tmp_path: Path, real_tles_text: str) -> None:

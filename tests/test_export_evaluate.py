@@ -201,7 +201,15 @@ def test_public_surface() -> None:
             "product_info",
         ]
     )
-    assert ex.FORMATS == ("json", "xtce", "yamcs-push", "cosmos", "c-header", "polynomial")
+    assert ex.FORMATS == (
+        "json",
+        "xtce",
+        "yamcs-push",
+        "yamcs-instance",
+        "cosmos",
+        "c-header",
+        "polynomial",
+    )
     assert ex.DEFAULT_RAW_NAMES == ("MAG_X_RAW", "MAG_Y_RAW", "MAG_Z_RAW")
     assert ex.DEFAULT_CAL_NAMES == ("MAG_X_CAL", "MAG_Y_CAL", "MAG_Z_CAL")
 

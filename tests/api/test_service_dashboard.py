@@ -486,8 +486,10 @@ def test_dashboard_in_chromium(fleet: Fleet, tmp_path: Path) -> None:
         assert quarantine["n_samples"] == 60
         # the verdict, dt, shrink, the effect it cannot tell apart and why
         _set_report(server, _report())
-        browser.evaluate("location.reload()")
-        browser.wait_for("document.getElementById('diagnosis-verdict').innerText")
+        browser.evaluate("window.beforeReload = true; location.reload()")
+        browser.wait_for(
+            "!window.beforeReload && document.getElementById('diagnosis-verdict').innerText"
+        )
         verdict = browser.evaluate("document.getElementById('diagnosis-verdict').innerText")
         assert verdict.startswith("Verdict: time_offset") and "dt_s = -0.503" in verdict
         assert "shrink 7.69" in verdict
@@ -647,8 +649,10 @@ def test_dashboard_health_first_screen(tmp_path: Path) -> None:
                     versions = c.get("/v1/spacecraft/sc/calibrations").json()
                 df, _ = world(t + 3600.0, 360, sensor=SENSOR_B, seed=31, positions=False)
                 c.post("/v1/spacecraft/sc/telemetry", content=_parquet(df), headers=_PQ)
-            browser.evaluate("location.reload()")
-            assert browser.wait_for("document.body.dataset.ready") == "sc"
+            # the old document must not answer for the new one: mark it, then wait for a
+            # document without the mark that has loaded its data
+            browser.evaluate("window.beforeReload = true; location.reload()")
+            assert browser.wait_for("!window.beforeReload && document.body.dataset.ready") == "sc"
             ok_line = browser.evaluate("document.getElementById('health-line').innerText")
             newest = browser.evaluate(
                 "[...document.querySelectorAll('#plot-versions .newest-point')].length"

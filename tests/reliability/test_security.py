@@ -89,6 +89,8 @@ ROUTES: list[Route] = [
     ("GET", "/v1/spacecraft/{spacecraft_id}/calibration", READ, lambda ids: {}),
     ("GET", "/v1/spacecraft/{spacecraft_id}/calibrations/{version}", READ, lambda ids: {}),
     ("GET", "/v1/spacecraft/{spacecraft_id}/residuals", READ, lambda ids: {}),
+    ("GET", "/v1/spacecraft/{spacecraft_id}/health", READ, lambda ids: {}),
+    ("GET", "/v1/spacecraft/{spacecraft_id}/health/series", READ, lambda ids: {}),
     ("GET", "/v1/spacecraft/{spacecraft_id}/activity", READ, lambda ids: {}),
     (
         "POST",

@@ -105,13 +105,25 @@ def log_evidence(
     zz = proj.q - 2.0 * float(mean @ proj.b[cols]) + float(mean @ g @ mean)
     gs = sd[:, None] * g * sd[None, :]
     m = np.eye(cols.size) + gs
-    chol = np.linalg.cholesky(m)
-    u = sd * bz
-    w = np.linalg.solve(chol, u)
-    logdet = 2.0 * float(np.sum(np.log(np.diag(chol))))
-    log_m = -0.5 * (logdet + zz - float(w @ w))
-    theta = mean + sd * np.linalg.solve(chol.T, w)
+    logdet, m_inv_u = _logdet_solve(m, sd * bz)
+    log_m = -0.5 * (logdet + zz - float((sd * bz) @ m_inv_u))
+    theta = mean + sd * m_inv_u
     return log_m, theta
+
+
+def _logdet_solve(m: FloatArray, u: FloatArray) -> tuple[float, FloatArray]:
+    """``log det m`` and ``m^-1 u`` for ``m = I + S G S``, positive definite in exact arithmetic
+    (G is a Gram matrix). With a singular calibration Gram (a dead axis, a constant field) the
+    projection leaves G indefinite in floating point: then through the eigenvalues, each held
+    at or above 1 (the exact matrix's lower bound)."""
+    try:
+        chol = np.linalg.cholesky(m)
+    except np.linalg.LinAlgError:
+        vals, vecs = np.linalg.eigh(0.5 * (m + m.T))
+        vals = np.where(np.isfinite(vals), np.maximum(vals, 1.0), 1.0)
+        return float(np.sum(np.log(vals))), vecs @ ((vecs.T @ u) / vals)
+    w = np.linalg.solve(chol, u)
+    return 2.0 * float(np.sum(np.log(np.diag(chol)))), np.linalg.solve(chol.T, w)
 
 
 def _cols(forms: Sequence[Form]) -> npt.NDArray[np.intp]:
