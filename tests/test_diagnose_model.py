@@ -250,3 +250,49 @@ def test_cli_report_has_the_probability_keys_under_the_model_engine(
 def test_model_options_refuse_an_unknown_engine() -> None:
     with pytest.raises(ValueError, match="engine"):
         ModelOptions(engine="votes")
+
+
+def test_orbit_folds_are_orbit_long_and_join_a_short_last_block() -> None:
+    from orbitcal.diagnose.model.crossval import orbit_folds
+
+    t = np.arange(0.0, 3.2 * 5600.0, 10.0)
+    fold = orbit_folds(t, 5600.0)
+    assert fold.max() == 2  # the last 0.2 orbit joins the third fold
+    assert np.all(np.diff(fold) >= 0)
+    assert np.sum(fold == 0) == 560
+    assert orbit_folds(t[:100], 5600.0).max() == 0
+
+
+def test_cross_validation_keeps_a_real_effect_and_withdraws_columns_that_do_not_predict(
+    real_tles_text: str,
+) -> None:
+    """A magnetorquer world: the coupling predicts every left-out orbit; a 12-column group that
+    is not in the data (fitted to noise alone) does not, and leaves the model."""
+    import dataclasses as dc
+
+    from orbitcal.diagnose.model.core import CAL_PRIOR_SD_NT, _compact
+    from orbitcal.diagnose.model.crossval import cross_validated
+
+    data = _simulated("magnetorquer", 5, real_tles_text)
+    train, holdout = training_split(data)
+    md = model_diagnosis(data, train, holdout)
+    assert md.chosen == ("magnetorquer",) and md.crossval.folds >= 2
+    assert md.crossval.gain["magnetorquer"] > 0.0
+    forms = {f.effect: f for f in candidate_forms(data, train, ModelOptions())}
+    absent = max(
+        (f for f in forms.values() if f.effect != "magnetorquer"), key=lambda f: f.block.width
+    )
+    assert absent.block.width >= 6
+    chosen = _compact([forms["magnetorquer"], absent])
+    cv = cross_validated(
+        data,
+        train,
+        chosen,
+        md.noise,
+        skip=60,
+        cal_mean=md.posterior.thetas[0][:12],
+        cal_sd=np.full(12, CAL_PRIOR_SD_NT),
+    )
+    assert cv.kept == ("magnetorquer",), cv
+    assert cv.withdrawn == (absent.effect,) and cv.gain[absent.effect] <= 0.0
+    assert dc.asdict(cv)["folds"] == md.crossval.folds

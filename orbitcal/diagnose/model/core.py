@@ -25,6 +25,7 @@ from orbitcal.diagnose.data import DiagnosisData
 from orbitcal.diagnose.design import DesignBlock
 from orbitcal.diagnose.effects import CATALOGUE, Effect
 from orbitcal.diagnose.model.confirm import Confirmation, confirm
+from orbitcal.diagnose.model.crossval import CrossValidation, cross_validated
 from orbitcal.diagnose.model.evidence import (
     Augmented,
     Posterior,
@@ -64,7 +65,8 @@ class ModelDiagnosis:
     posterior : Posterior
         Over every model of at most ``max_effects`` candidates.
     chosen : tuple of str
-        The effects of inclusion probability at least the options' cut-off, most probable first.
+        The effects of inclusion probability at least the options' cut-off that also predict
+        the training span's left-out orbits (``crossval``), most probable first.
     confirmation : Confirmation
         The chosen model against the calibration alone on the final block.
     noise : tuple of AxisNoise
@@ -78,6 +80,9 @@ class ModelDiagnosis:
     noise_weights : tuple of float
         Posterior weights of the noise models tried (of the calibration's residual, of the
         encompassing model's); ``noise`` is the heavier.
+    crossval : CrossValidation
+        The posterior's choice checked on orbit-long folds of the training span (``chosen`` is
+        what it kept).
     """
 
     posterior: Posterior
@@ -88,6 +93,7 @@ class ModelDiagnosis:
     params: dict[str, dict[str, float]] = field(default_factory=dict)
     forms: dict[str, str] = field(default_factory=dict)
     noise_weights: tuple[float, ...] = ()
+    crossval: CrossValidation = field(default_factory=lambda: CrossValidation(0))
 
     def inclusion(self) -> dict[str, float]:
         """Posterior inclusion probability per candidate."""
@@ -304,10 +310,22 @@ def model_diagnosis(
     ]
     post, weights = averaged([f.post for f in fits])
     fit = fits[int(np.argmax(weights))]
+    by_effect = {f.effect: f for f in fit.best}
     chosen = post.median_model(options.selection_probability)
+    crossval = CrossValidation(0, kept=chosen)
     if confirm_model is not None:
         chosen = tuple(confirm_model)
-    by_effect = {f.effect: f for f in fit.best}
+    elif chosen:
+        crossval = cross_validated(
+            data,
+            train,
+            _compact([by_effect[e] for e in chosen]),
+            fit.noise,
+            skip=skip,
+            cal_mean=cal_mean,
+            cal_sd=np.full(12, CAL_PRIOR_SD_NT),
+        )
+        chosen = crossval.kept
     model_key = tuple(sorted(post.effects.index(e) for e in chosen))
     params = post.thetas[post.models.index(model_key)]
     chosen_forms = [by_effect[e] for e in sorted(chosen, key=post.effects.index)]
@@ -331,6 +349,7 @@ def model_diagnosis(
         params=_params(post, fit.best, chosen_forms, params[12:]),
         forms={f.effect: f.block.variant for f in fit.best},
         noise_weights=tuple(float(w) for w in weights),
+        crossval=crossval,
     )
 
 

@@ -61,6 +61,7 @@ def model_section(md: ModelDiagnosis, options: ModelOptions) -> dict[str, Any]:
         "inclusion_probability": {e: _p(p) for e, p in sorted(inc.items(), key=lambda kv: -kv[1])},
         "probability_none": _p(md.posterior.none()),
         "chosen": list(md.chosen),
+        "cross_validation": md.crossval.to_json(),
         "confirmed": bool(named),
         "named": list(named),
         "splits": splits(md, options.selection_probability),
