@@ -23,6 +23,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from orbitcal.calibrate.holdout import HOLDOUT_FRACTION
+
 if TYPE_CHECKING:
     import numpy.typing as npt
     import pandas as pd
@@ -186,7 +188,7 @@ def calibrate_table(
     method: str = "lmbp-hk",
     field: str = "IGRF-14",
     attitude_frame: str = "GCRS",
-    holdout_fraction: float = 0.25,
+    holdout_fraction: float = HOLDOUT_FRACTION,
     seed: int = 0,
     spacecraft: str | None = None,
     **options: Any,
@@ -204,7 +206,8 @@ def calibrate_table(
     field, attitude_frame : str, keyword-only
         As in :func:`reference_field`.
     holdout_fraction : float, keyword-only
-        Share of the latest samples held out for the metrics (default 0.25).
+        Share of the latest samples held out for the metrics (default
+        :data:`~orbitcal.calibrate.holdout.HOLDOUT_FRACTION`, as on every surface).
     seed : int, keyword-only
         Seeds the fit's random start.
     spacecraft : str, keyword-only
