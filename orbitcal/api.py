@@ -204,7 +204,9 @@ def calibrate_table(
     field, attitude_frame : str, keyword-only
         As in :func:`reference_field`.
     holdout_fraction : float, keyword-only
-        Share of the latest samples held out for the metrics (default 0.25).
+        Share of the latest samples held out for the metrics (default
+        :data:`~orbitcal.calibrate.holdout.HOLDOUT_FRACTION`, as on every surface; written
+        out so that loading this module imports no numpy, and held equal to it by a test).
     seed : int, keyword-only
         Seeds the fit's random start.
     spacecraft : str, keyword-only

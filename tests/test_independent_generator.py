@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from contract_doc import CONTRACT_EFFECTS
 
 HERE = Path(__file__).resolve().parents[1] / "benchmarks" / "independent"
 sys.path.insert(0, str(HERE))
@@ -18,20 +19,6 @@ sys.path.insert(0, str(HERE))
 import noise  # noqa: E402
 import shapes  # noqa: E402
 import world  # noqa: E402
-
-CONTRACT_EFFECTS = {
-    "temperature",
-    "magnetorquer",
-    "time_offset",
-    "external_field",
-    "crustal_field",
-    "sun_driven",
-    "nonlinearity",
-    "orbit_error",
-    "parameter_drift",
-    "field_aligned_currents",
-    "attitude_error",
-}
 
 
 def test_the_generator_knows_the_eleven_effects_and_draws_one_to_three() -> None:

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from plausibility_cases import CASES, SAYS, UNIT_SCALE, case_field
 
 import orbitcal
 from orbitcal.cli import main
@@ -39,16 +40,6 @@ from orbitcal.plausibility import (
 from orbitcal.reproduce.onorbit import OrbitWorld, orbit_world, write_tle
 from orbitcal.telemetry import Telemetry, write_telemetry
 
-CASES = ("nT (control)", "Tesla", "Gauss", "µT", "swapped axis", "wrong spacecraft", "stuck axis")
-#: What each case's refusal or warning must say.
-SAYS = {
-    "Tesla": "looks like Tesla: scale by 1e9",
-    "Gauss": "looks like Gauss: scale by 1e5",
-    "µT": "looks like µT: scale by 1e3",
-    "swapped axis": "two sensor axes are swapped",
-    "wrong spacecraft": "the orbit elements do not match the data",
-    "stuck axis": "vary in only 2 of 3",
-}
 TABLE: list[tuple[str, str, str]] = []
 
 
@@ -59,20 +50,14 @@ def world() -> OrbitWorld:
 
 def _case(world: OrbitWorld, name: str) -> tuple[Telemetry, str]:
     """The table and the TLE text of case ``name``."""
-    tel, b = world.telemetry, world.telemetry.b_raw_nt
-    scale = {"Tesla": 1e-9, "Gauss": 1e-5, "µT": 1e-3}
-    if name in scale:
-        return dataclasses.replace(tel, b_raw_nt=b * scale[name]), world.tle
-    if name == "swapped axis":
-        return dataclasses.replace(tel, b_raw_nt=np.ascontiguousarray(b[:, [1, 0, 2]])), world.tle
-    if name == "stuck axis":
-        return dataclasses.replace(tel, b_raw_nt=np.c_[b[:, :2], np.full(len(b), b[0, 2])]), (
-            world.tle
-        )
+    tel = world.telemetry
     if name == "wrong spacecraft":
         iss = orbitcal.load_orbit(real_tles_text(), norad_id=25544, near_utc_s=tel.t_utc_s[0])
         return tel, "\n".join(iss.source[-2:])
-    return tel, world.tle
+    b = case_field(tel.b_raw_nt, name)
+    if b is tel.b_raw_nt:
+        return tel, world.tle
+    return dataclasses.replace(tel, b_raw_nt=b), world.tle
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -190,7 +175,7 @@ def test_the_bounds_and_messages_of_each_class() -> None:
     assert 14_000 < lo < 15_000 and 55_000 < hi < 56_000  # (R/r)^3 = 0.815 at 450 km
     b = np.tile([20_000.0, 5_000.0, 30_000.0], (50, 1))
     assert field_scale_problem(b, r_km=6371.2 + 450) is None
-    for unit, factor in (("Tesla", 1e-9), ("Gauss", 1e-5), ("µT", 1e-3)):
+    for unit, factor in UNIT_SCALE.items():
         assert f"looks like {unit}" in str(field_scale_problem(b * factor, r_km=6821.2))
     assert "gains" in str(calibration_problem(np.eye(3) * 1e9, 1.0))
     assert "gains" in str(calibration_problem(np.diag([1.0, 1.0, GAIN_BOUNDS[0] / 2]), 1.0))

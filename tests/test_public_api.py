@@ -260,3 +260,15 @@ def test_notebook_surface() -> None:
         assert callable(getattr(orbitcal, name)) and getattr(orbitcal, name).__doc__
     with pytest.raises(AttributeError):
         orbitcal.not_a_name  # noqa: B018
+
+
+def test_calibrate_table_holds_out_the_share_every_surface_holds_out() -> None:
+    """The default is written out (``orbitcal.api`` loads without numpy); it must not drift from
+    the one share the CLI, the pipeline and the service hold out."""
+    import inspect
+
+    from orbitcal.api import calibrate_table
+    from orbitcal.calibrate.holdout import HOLDOUT_FRACTION
+
+    default = inspect.signature(calibrate_table).parameters["holdout_fraction"].default
+    assert default == HOLDOUT_FRACTION

@@ -8,6 +8,7 @@ against the oracle; a confusion matrix as JSON and PNG in ``--out DIR``.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import platform
@@ -129,12 +130,34 @@ def run_diagnose(args: argparse.Namespace) -> int:
                 fh.write(json.dumps(out) + "\n")
         correct += bool(out["correct"])
 
-    if not console.is_terminal:
-        # Not a terminal (a pipe, a log file, CI): a bar would draw nothing for the whole run
-        # (9.5 min of silence at 240 worlds); one plain line per world instead.
-        def on_line(i: int, out: dict[str, object]) -> None:
-            record(out)
-            print(_case_line(i, args.cases, out, correct, time.perf_counter() - t0), flush=True)
+    # A bar only on a terminal: off one (a pipe, a log file, CI) it would draw nothing for the
+    # whole run (9.5 min of silence at 240 worlds); one plain line per world instead.
+    bar = (
+        Progress(
+            TextColumn("[bold]diagnose[/]"),
+            BarColumn(),
+            TextColumn("{task.completed}/{task.total}"),
+            TextColumn("top-1 {task.fields[acc]}"),
+            TimeElapsedColumn(),
+            console=console,
+        )
+        if console.is_terminal
+        else None
+    )
+    with bar if bar is not None else contextlib.nullcontext():
+        if bar is None:
+
+            def on_case(i: int, out: dict[str, object]) -> None:
+                record(out)
+                print(_case_line(i, args.cases, out, correct, time.perf_counter() - t0), flush=True)
+
+        else:
+            progress = bar
+            task = progress.add_task("cases", total=args.cases, acc="-")
+
+            def on_case(i: int, out: dict[str, object]) -> None:
+                record(out)
+                progress.update(task, advance=1, acc=f"{correct / (i + 1):.1%}")
 
         try:
             result = run_benchmark(
@@ -142,36 +165,10 @@ def run_diagnose(args: argparse.Namespace) -> int:
                 seed=args.seed,
                 tle_text=tle_text,
                 n_orbits=args.orbits,
-                progress=on_line,
+                progress=on_case,
             )
-        except KeyboardInterrupt:
+        except KeyboardInterrupt:  # leaving the ``with`` stops the bar
             raise _finished_note(partial, len(finished)) from None
-    else:
-        with Progress(
-            TextColumn("[bold]diagnose[/]"),
-            BarColumn(),
-            TextColumn("{task.completed}/{task.total}"),
-            TextColumn("top-1 {task.fields[acc]}"),
-            TimeElapsedColumn(),
-            console=console,
-        ) as progress:
-            task = progress.add_task("cases", total=args.cases, acc="-")
-
-            def on_case(i: int, out: dict[str, object]) -> None:
-                record(out)
-                progress.update(task, advance=1, acc=f"{correct / (i + 1):.1%}")
-
-            try:
-                result = run_benchmark(
-                    args.cases,
-                    seed=args.seed,
-                    tle_text=tle_text,
-                    n_orbits=args.orbits,
-                    progress=on_case,
-                )
-            except KeyboardInterrupt:
-                progress.stop()
-                raise _finished_note(partial, len(finished)) from None
     if partial is not None:
         partial.unlink(missing_ok=True)  # the whole results follow
     wall = time.perf_counter() - t0

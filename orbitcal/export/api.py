@@ -81,12 +81,12 @@ def held_out_loss(
     """Held-out RMS [nT] of the whole calibration and of the reduced forms the exports carry.
 
     The held-out rows are the later time blocks of ``telemetry`` (the document's
-    ``metrics.holdout_fraction``, else 0.25) or, with ``all_held_out`` (a sentence saying why,
-    e.g. the span a retraining held out), every row; the reference field is the document's. For
-    scalar methods the figure is the scalar one (``|b_cal| - |B_ref|``), as for their
-    ``holdout_rms_nt``.
+    ``metrics.holdout_fraction``, else :data:`~orbitcal.calibrate.holdout.HOLDOUT_FRACTION`) or,
+    with ``all_held_out`` (a sentence saying why, e.g. the span a retraining held out), every row;
+    the reference field is the document's. For scalar methods the figure is the scalar one
+    (``|b_cal| - |B_ref|``), as for their ``holdout_rms_nt``.
     """
-    from orbitcal.calibrate.holdout import later_block_split
+    from orbitcal.calibrate.holdout import HOLDOUT_FRACTION, later_block_split
     from orbitcal.export.evaluate import evaluate
     from orbitcal.export.polynomial import evaluate_diagonal
     from orbitcal.metrics import rms_nt
@@ -95,7 +95,7 @@ def held_out_loss(
     form = calibration_form(doc)
     tel = telemetry.sort_by_time()
     frame = attitude_frame or str((doc.get("model") or {}).get("attitude_frame", "GCRS"))
-    fraction = float((doc.get("metrics") or {}).get("holdout_fraction", 0.25))
+    fraction = float((doc.get("metrics") or {}).get("holdout_fraction", HOLDOUT_FRACTION))
     data, _ = fit_data_for_telemetry(
         tel, orbit=orbit, field=str(doc["reference_field"]), attitude_frame=frame
     )

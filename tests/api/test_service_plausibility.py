@@ -16,21 +16,14 @@ from collections.abc import Iterator
 
 import httpx
 import pytest
+from plausibility_cases import CASES, SAYS, case_field
 from service_helpers import LiveServer, wait_job
 from service_worlds import SWARM_A_TLE, T0_UTC_S, world
 
 import orbitcal
 from orbitcal.data import real_tles_text
 
-CASES = ("nT (control)", "Tesla", "Gauss", "µT", "swapped axis", "wrong spacecraft", "stuck axis")
-SAYS = {
-    "Tesla": "looks like Tesla: scale by 1e9",
-    "Gauss": "looks like Gauss: scale by 1e5",
-    "µT": "looks like µT: scale by 1e3",
-    "swapped axis": "two sensor axes are swapped",
-    "wrong spacecraft": "the orbit elements do not match the data",
-    "stuck axis": "vary in only 2 of 3",
-}
+B_COLUMNS = ["b_x", "b_y", "b_z"]
 TABLE: list[tuple[str, str, str]] = []
 
 
@@ -50,14 +43,7 @@ def _iss_tle() -> str:
 
 def _body(case: str) -> bytes:
     df, _ = world(T0_UTC_S, 1500, positions=False)
-    scale = {"Tesla": 1e-9, "Gauss": 1e-5, "µT": 1e-3}
-    if case in scale:
-        for axis in ("b_x", "b_y", "b_z"):
-            df[axis] = df[axis] * scale[case]
-    elif case == "swapped axis":
-        df["b_x"], df["b_y"] = df["b_y"].to_numpy(), df["b_x"].to_numpy()
-    elif case == "stuck axis":
-        df["b_z"] = float(df["b_z"].iloc[0])
+    df[B_COLUMNS] = case_field(df[B_COLUMNS].to_numpy(), case)
     buf = io.BytesIO()
     df.to_parquet(buf, index=False)
     return buf.getvalue()
@@ -106,8 +92,7 @@ def test_a_small_upload_in_another_unit_is_stored_with_a_warning(server: LiveSer
     from service.ingest import PLAUSIBILITY_MIN_ROWS
 
     df, _ = world(T0_UTC_S, PLAUSIBILITY_MIN_ROWS - 1, positions=False)
-    for axis in ("b_x", "b_y", "b_z"):
-        df[axis] = df[axis] * 1e-9
+    df[B_COLUMNS] = case_field(df[B_COLUMNS].to_numpy(), "Tesla")
     with server.client() as c:
         assert c.post("/v1/spacecraft", json={"id": "few", "tle": SWARM_A_TLE}).status_code == 201
         r = c.post(
