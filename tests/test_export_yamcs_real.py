@@ -14,7 +14,6 @@ from __future__ import annotations
 import json
 import socket
 import struct
-import time
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +21,6 @@ import numpy as np
 import pytest
 from yamcs_real import (
     METHODS,
-    VALUE_TIMEOUT_S,
     YamcsServer,
     eng,
     export_options,
@@ -102,6 +100,37 @@ class Feeder:
         if any(n == "qualified" for _, n in cells):
             self.udp.sendto(struct.pack(">B5d", 2, *map(float, hk)), ("127.0.0.1", self.udp_port))
 
+    def row(
+        self,
+        cells: list[tuple[str, str]],
+        hk: np.ndarray | None,
+        b: np.ndarray,
+        stamp: float,
+        outputs: list[str],
+    ) -> dict[str, dict[str, Any]]:
+        """One row, one input route at a time: the local inputs over REST (housekeeping, then
+        the raw row ``b``; ``hk`` None: none), awaited until each raw value and the ``outputs``
+        it triggers show in the cache; then the mission's packets over UDP, awaited the same way.
+
+        Never both routes at once: Yamcs 5.12.8 processes REST sets on the processor's thread
+        and packets on the UDP link's, and does not serialize the two through the algorithms. A
+        delivery of one route refreshes every algorithm's inputs from the last-value cache, which
+        gets the other route's in-flight values only once that delivery ends; landing between
+        the other delivery's input update and its run, it makes the algorithm compute with the
+        previous row (docs/yamcs.md, "One input route at a time")."""
+        got: dict[str, dict[str, Any]] = {}
+        local = [c for c in cells if c[1] != "qualified"]
+        packets = [c for c in cells if c[1] == "qualified"]
+        for route in (local, packets):
+            if not route:
+                continue
+            if hk is not None:
+                self.hk(route, hk)
+            for name, value in self.raw(route, b, stamp).items():
+                mine = [o for o in outputs if _feeds(name, o)]
+                got.update(self.proc.wait_for({name: value}, [], mine))
+        return got
+
 
 def _outputs(method: str, names: str, hk_columns: tuple[str, ...]) -> tuple[list[str], list[str]]:
     """Qualified names of the calibrated and the affine outputs of a cell."""
@@ -118,7 +147,8 @@ def _replay(
     rows: np.ndarray,
     stamp0: float,
 ) -> dict[tuple[str, str], tuple[float, float]]:
-    """Replay ``rows`` (housekeeping first, then the raw row) into every cell; return, per cell,
+    """Replay ``rows`` (housekeeping first, then the raw row; one input route at a time,
+    :meth:`Feeder.row`) into every cell; return, per cell,
     max |CAL - apply| and max |CAL_LIN - affine part| [nT]."""
     worst: dict[tuple[str, str], list[float]] = {c: [0.0, 0.0] for c in cells}
     for i, row in enumerate(rows):
@@ -138,18 +168,8 @@ def _replay(
             cal, lin = _outputs(method, names, form.hk_names)
             wanted.update(zip(cal, evaluate_form(form, b[None, :], x)[0], strict=True))
             wanted.update(zip(lin, evaluate_form(affine_part(form), b[None, :], x)[0], strict=True))
-        for attempt in range(2):
-            feeder.hk(cells, any_hk[row])
-            expected = feeder.raw(cells, feeder.fitted[METHODS[0]].telemetry.b_raw_nt[row], stamp)
-            got: dict[str, dict[str, Any]] = {}
-            for name, value in expected.items():
-                mine = [o for o in outputs if _feeds(name, o)]
-                got.update(feeder.proc.wait_for({name: value}, [], mine))
-            got = _settled(feeder, got, wanted, SETTLE_S if attempt == 0 else VALUE_TIMEOUT_S)
-            stale = [n for n, v in wanted.items() if not abs(_value(got, n) - v) < YAMCS_NT]
-            if not stale:
-                break
-            RESENT.append((i, stale))  # known: see _settled
+        raw_row = feeder.fitted[METHODS[0]].telemetry.b_raw_nt[row]
+        got = feeder.row(cells, any_hk[row], raw_row, stamp, outputs)
         for method, names in cells:
             cal, lin = _outputs(method, names, calibration_form(documents[method]).hk_names)
             d_cal = max(abs(_value(got, c) - wanted[c]) for c in cal)
@@ -159,33 +179,9 @@ def _replay(
     return {c: (w[0], w[1]) for c, w in worst.items()}
 
 
-#: Rows whose outputs had to be set a second time, and which outputs had kept the previous
-#: row's value: a known defect (docs/yamcs.md, "Known limits"). Yamcs runs an algorithm on each
-#: input's update; with the raw axes set over REST as separate local parameters, about one run
-#: in three leaves one output (a *_CAL or *_CAL_LIN of one axis) at the previous row's value
-#: until its inputs are updated again. The row is set once more; a second miss fails the test.
-RESENT: list[tuple[int, list[str]]] = []
-SETTLE_S = 5.0
-
-
 def _value(got: dict[str, dict[str, Any]], name: str) -> float:
     value = eng(got.get(name))
     return float("nan") if value is None else float(value)
-
-
-def _settled(
-    feeder: Feeder, got: dict[str, dict[str, Any]], wanted: dict[str, float], timeout_s: float
-) -> dict[str, dict[str, Any]]:
-    """The outputs once the row's inputs have reached every algorithm: polled until every output
-    holds the row's value or ``timeout_s`` passes (a value that never comes is returned as it
-    is, and the comparison then fails)."""
-    deadline = time.monotonic() + timeout_s
-    while any(not abs(_value(got, n) - v) < YAMCS_NT for n, v in wanted.items()):
-        if time.monotonic() > deadline:
-            break
-        time.sleep(0.02)
-        got = {**got, **feeder.proc.get(list(wanted))}
-    return got
 
 
 def _feeds(raw_name: str, output: str) -> bool:
@@ -210,16 +206,13 @@ def test_every_export_loads_and_computes_apply(yamcs_suite: Any) -> None:
         assert np.array_equal(fitted[m].telemetry.b_raw_nt, f0.telemetry.b_raw_nt)
 
     # values before housekeeping: a raw row, no housekeeping yet
-    expected = feeder.raw(cells, f0.telemetry.b_raw_nt[rows[0]], 0.0)
     no_hk = [(m, n) for m, n in cells if not calibration_form(documents[m]).hk_names]
+    outs = [o for m, n in no_hk for o in _outputs(m, n, ())[0]]
+    got = feeder.row(cells, None, f0.telemetry.b_raw_nt[rows[0]], 0.0, outs)
     before: dict[tuple[str, str], Any] = {}
-    for name, value in expected.items():
-        outs = [o for m, n in no_hk for o in _outputs(m, n, ())[0] if _feeds(name, o)]
-        got = proc.wait_for({name: value}, [], outs)
-        for m, n in cells:
-            cal, _ = _outputs(m, n, calibration_form(documents[m]).hk_names)
-            if _feeds(name, cal[0]):
-                before[(m, n)] = eng(got.get(cal[0]))
+    for m, n in cells:
+        cal, _ = _outputs(m, n, calibration_form(documents[m]).hk_names)
+        before[(m, n)] = eng(got.get(cal[0]))
     for m, n in cells:
         status = proc.algorithm_status(f"/{system_name(m, n)}/MagCalibration")
         assert status.get("errorCount", 0) == 0, (m, n, status)
