@@ -48,9 +48,11 @@ def run_panel(panel: str, cases: int, seed: int, engine: str, chosen_by: str) ->
     from orbitcal.data import real_tles_text
     from orbitcal.diagnose import bench
 
-    saved = bench.BENCH_OPTIONS
+    saved, saved_diagnosed = bench.BENCH_OPTIONS, bench._diagnosed
     if chosen_by == "option":
         bench.BENCH_OPTIONS = options_with_engine(saved, engine)
+    if engine == "model":
+        bench._diagnosed = _reported_verdict
     try:
         run = bench.run_compound_benchmark if panel == "compound" else bench.run_benchmark
         t0 = time.time()
@@ -58,7 +60,32 @@ def run_panel(panel: str, cases: int, seed: int, engine: str, chosen_by: str) ->
         result["wall_s"] = round(time.time() - t0, 1)
         return result
     finally:
-        bench.BENCH_OPTIONS = saved
+        bench.BENCH_OPTIONS, bench._diagnosed = saved, saved_diagnosed
+
+
+def _reported_verdict(data: Any) -> Any:
+    """The world's attribution with the *report's* verdict and named effects.
+
+    ``orbitcal.diagnose.bench`` scores the rules engine's ``Attribution``; the model engine's
+    verdict exists only in the report (``orbitcal.diagnose.model.with_model_keys``), so under it
+    the verdict, the selected effects (significant in the report, most probable first) and the
+    verdict's probability are taken from there. The held-out RMS columns stay the attribution's
+    final fit under both engines (the model core's own are the report's ``confirmation``).
+    Without this the model column scored the rules engine's verdict (VALIDATION.md)."""
+    import dataclasses
+
+    from orbitcal.diagnose import bench
+    from orbitcal.diagnose.api import diagnose_data
+
+    diagnosis = diagnose_data(data, options=bench.BENCH_OPTIONS)
+    report = diagnosis.report
+    named = [str(e["name"]) for e in report["effects"] if e.get("significant")]
+    return dataclasses.replace(
+        diagnosis.attribution,
+        verdict=str(report["verdict"]),
+        selected=named,
+        verdict_confidence=report.get("verdict_probability"),
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
