@@ -45,7 +45,7 @@ from orbitcal.diagnose.model.gram import (
     whitened_gram,
     whitened_grams,
 )
-from orbitcal.diagnose.model.noise_model import AxisNoise, fit_noise, noise_skip
+from orbitcal.diagnose.model.noise_model import AxisNoise, fit_noise, noise_skip, run_starts
 from orbitcal.diagnose.options import ModelOptions
 
 __all__ = ["ModelDiagnosis", "candidate_forms", "model_diagnosis", "run_starts"]
@@ -105,20 +105,6 @@ class ModelDiagnosis:
         if effect == "none":
             return self.posterior.none()
         return self.inclusion().get(effect, 0.0)
-
-
-def run_starts(data: DiagnosisData, index: IntArray, step: int) -> IntArray:
-    """Per position of ``index``, where its run begins: consecutive samples ``step`` apart, no
-    time gap over three median steps."""
-    index = np.asarray(index)
-    if index.size == 0:
-        return np.zeros(0, dtype=np.intp)
-    t = data.t_utc_s[index]
-    dt = np.diff(t)
-    gap = dt > 3.0 * float(np.median(dt)) if dt.size else np.zeros(0, dtype=bool)
-    new = np.r_[True, (np.diff(index) != step) | gap]
-    starts = np.flatnonzero(new)
-    return np.asarray(starts[np.cumsum(new) - 1], dtype=np.intp)
 
 
 def _fill_sd(block: DesignBlock, sd: FloatArray, data: DiagnosisData) -> FloatArray:

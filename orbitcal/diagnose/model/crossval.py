@@ -32,7 +32,7 @@ from orbitcal.arrays import BoolArray, FloatArray
 from orbitcal.diagnose.data import DiagnosisData
 from orbitcal.diagnose.model.evidence import Augmented, augment, model_evidence
 from orbitcal.diagnose.model.gram import Form, Gram, whitened_grams
-from orbitcal.diagnose.model.noise_model import AxisNoise
+from orbitcal.diagnose.model.noise_model import AxisNoise, run_starts
 
 __all__ = ["CrossValidation", "cross_validated", "orbit_folds", "orbital_period_s"]
 
@@ -122,8 +122,6 @@ def _fold_grams(
     cal_mean: FloatArray,
     cal_sd: FloatArray,
 ) -> _Folds:
-    from orbitcal.diagnose.model.core import run_starts
-
     grams = []
     for k in range(int(fold.max()) + 1):
         ik = index[fold == k]

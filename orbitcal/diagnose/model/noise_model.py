@@ -23,12 +23,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from orbitcal.arrays import FloatArray
 
-__all__ = ["AxisNoise", "fit_axis_noise", "fit_noise", "noise_skip", "runs_of_index"]
+if TYPE_CHECKING:
+    from orbitcal.diagnose.data import DiagnosisData
+
+__all__ = ["AxisNoise", "fit_axis_noise", "fit_noise", "noise_skip", "run_starts", "runs_of_index"]
 
 IntArray = np.ndarray
 
@@ -249,3 +253,17 @@ def fit_noise(
 def describe_noise(noise: Sequence[AxisNoise]) -> list[str]:
     """One line per axis."""
     return [f"{axis}: {n.describe()}" for axis, n in zip("xyz", noise, strict=False)]
+
+
+def run_starts(data: DiagnosisData, index: IntArray, step: int) -> IntArray:
+    """Per position of ``index``, where its run begins: consecutive samples ``step`` apart, no
+    time gap over three median steps."""
+    index = np.asarray(index)
+    if index.size == 0:
+        return np.zeros(0, dtype=np.intp)
+    t = data.t_utc_s[index]
+    dt = np.diff(t)
+    gap = dt > 3.0 * float(np.median(dt)) if dt.size else np.zeros(0, dtype=bool)
+    new = np.r_[True, (np.diff(index) != step) | gap]
+    starts = np.flatnonzero(new)
+    return np.asarray(starts[np.cumsum(new) - 1], dtype=np.intp)
