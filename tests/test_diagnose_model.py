@@ -14,10 +14,17 @@ from test_diagnose_worlds import make_world
 
 from orbitcal.diagnose.attribution.engine import training_split
 from orbitcal.diagnose.model import candidate_forms, model_diagnosis
-from orbitcal.diagnose.model.confirm import andrews_bandwidth, newey_west_variance
-from orbitcal.diagnose.model.evidence import augment, log_evidence, posterior, project
+from orbitcal.diagnose.model.confirm import (
+    Confirmation,
+    andrews_bandwidth,
+    confirm,
+    newey_west_variance,
+)
+from orbitcal.diagnose.model.core import ModelDiagnosis
+from orbitcal.diagnose.model.evidence import Posterior, augment, log_evidence, posterior, project
 from orbitcal.diagnose.model.gram import Form, Gram
-from orbitcal.diagnose.model.noise_model import fit_axis_noise, runs_of_index
+from orbitcal.diagnose.model.noise_model import AxisNoise, fit_axis_noise, runs_of_index
+from orbitcal.diagnose.model.report_keys import model_named, model_status, unconfirmed
 from orbitcal.diagnose.options import ModelOptions
 
 pytestmark = pytest.mark.usefixtures("single_thread_blas")
@@ -296,3 +303,86 @@ def test_cross_validation_keeps_a_real_effect_and_withdraws_columns_that_do_not_
     assert cv.kept == ("magnetorquer",), cv
     assert cv.withdrawn == (absent.effect,) and cv.gain[absent.effect] <= 0.0
     assert dc.asdict(cv)["folds"] == md.crossval.folds
+
+
+def _confirmation(p: float, before: float, after: float) -> Confirmation:
+    return Confirmation(before, after, p, 3.0, 100)
+
+
+def _diagnosis(
+    chosen: tuple[str, ...],
+    whole: Confirmation,
+    each: dict[str, Confirmation],
+    absorbed: dict[str, float] | None = None,
+) -> ModelDiagnosis:
+    """A model diagnosis of three candidates whose posterior includes ``chosen`` with 0.9."""
+    effects = ("a", "b", "c")
+    key = tuple(sorted(effects.index(e) for e in chosen))
+    models = [(), key] if key else [()]
+    prob = np.array([0.1, 0.9]) if key else np.array([1.0])
+    post = Posterior(effects, models, prob, np.zeros(len(models)), [np.zeros(12)] * len(models))
+    return ModelDiagnosis(
+        posterior=post,
+        chosen=chosen,
+        confirmation=whole,
+        noise=(),
+        absorbed=absorbed or {},
+        effect_confirmations=each,
+    )
+
+
+def test_a_forecast_that_overshoots_is_not_confirmed() -> None:
+    """The Clark-West statistic rewards a forecast that moves the right way whatever its size:
+    three times too far is 'significant' with a worse RMS. Confirmed means both."""
+    rng = np.random.default_rng(11)
+    n = 400
+    signal = 20.0 * np.sin(np.linspace(0.0, 6.0, n))[:, None] * np.ones((1, 3))
+    noise = rng.normal(size=(n, 3))
+    white = (AxisNoise("ar", np.zeros(0), 1.0, float("nan")),) * 3
+    starts = np.zeros(n, dtype=bool)
+    starts[0] = True
+    e_base = signal + noise
+    overshoot = confirm(e_base, e_base - 4.0 * signal, white, starts)
+    assert overshoot.p_value < 1e-3
+    assert overshoot.holdout_rms_after_nt > overshoot.holdout_rms_before_nt
+    assert not overshoot.passes(0.05)
+    right = confirm(e_base, noise, white, starts)
+    assert right.p_value < 1e-3 and right.passes(0.05)
+
+
+def test_each_chosen_effect_must_forecast_the_final_block_better_beside_the_others() -> None:
+    """Holm's step-down over the chosen effects' own tests; the whole model first."""
+    good, weak = _confirmation(1e-6, 10.0, 5.0), _confirmation(0.04, 10.0, 9.0)
+    worse = _confirmation(1e-9, 10.0, 12.0)
+    opts = ModelOptions()
+    md = _diagnosis(("a", "b"), good, {"a": good, "b": weak})
+    # by p: a at 0.05 / 2, then b at 0.05 / 1: both pass
+    assert model_named(md, opts) == ("a", "b")
+    md = _diagnosis(("a", "b", "c"), good, {"a": good, "b": weak, "c": worse})
+    # ordered by p: c (fails: worse RMS) stops the step-down before a and b
+    assert model_named(md, opts) == ()
+    md = _diagnosis(("a", "b", "c"), good, {"a": good, "b": _confirmation(0.03, 10, 9), "c": weak})
+    # a at 0.05/3, b 0.02 > 0.05/2 stops: only a
+    assert model_named(md, opts) == ("a",)
+    assert unconfirmed(md, opts) == ("b", "c")
+    assert "beside them, not confirmed on its own" in model_status(md, opts)
+    md = _diagnosis(("a",), worse, {})
+    assert model_named(md, opts) == ()
+
+
+def test_the_status_says_why_nothing_is_named() -> None:
+    opts = ModelOptions()
+    md = _diagnosis(("a",), _confirmation(1e-9, 721.0, 1126.0), {}, {"b": 0.97, "c": 0.3})
+    status = model_status(md, opts)
+    assert status.startswith("none: the model chosen on the training span, a (probability")
+    assert "does not forecast the final block better than the calibration alone" in status
+    assert "721.0 -> 1126.0 nT" in status
+    assert "most of the field of b (97 %)" in status and "c (" not in status
+    assert "cannot be separated from the calibration" in status
+    good = _confirmation(1e-6, 10.0, 5.0)
+    md = _diagnosis(
+        ("a", "b"), good, {"a": _confirmation(0.3, 6, 5), "b": _confirmation(0.4, 6, 5)}
+    )
+    status = model_status(md, opts)
+    assert status.startswith("none named alone: the chosen model")
+    assert "cannot tell which of a, b carries the gain" in status

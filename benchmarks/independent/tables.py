@@ -255,7 +255,14 @@ def _engines_worlds(runs: list[dict]) -> list[str]:
                 _cell(round(v["false_alarm_rate"] * v["worlds"]), v["worlds"]) if v else "-"
             )
         out.append(f"| {kind} | " + " | ".join(cells) + " |")
-    out += ["", "Reliability of the reported `probability` (effects listed, present or not):", ""]
+    out += [
+        "",
+        "Reliability of the reported `probability` (effects listed, present or not). Under both"
+        " engines `probability` is the model core's posterior inclusion probability (the engine"
+        " chooses the verdict, not the probabilities), so the two columns are the same numbers"
+        " on the same worlds:",
+        "",
+    ]
     for e in engines:
         rel = s[e]["reliability"]
         if not rel.get("pairs"):

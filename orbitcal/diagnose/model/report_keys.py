@@ -11,12 +11,20 @@ effects are the model core's too.
 from __future__ import annotations
 
 import itertools
+from collections.abc import Sequence
 from typing import Any
 
 from orbitcal.diagnose.model.core import ModelDiagnosis
 from orbitcal.diagnose.options import ModelOptions
 
-__all__ = ["model_named", "model_section", "splits", "with_model_keys"]
+__all__ = [
+    "model_named",
+    "model_section",
+    "model_status",
+    "splits",
+    "unconfirmed",
+    "with_model_keys",
+]
 
 
 def _p(x: float) -> float:
@@ -24,11 +32,87 @@ def _p(x: float) -> float:
 
 
 def model_named(md: ModelDiagnosis, options: ModelOptions) -> tuple[str, ...]:
-    """The effects the model core names: its chosen model when the confirmation passes at the
-    options' level, else none."""
-    if md.chosen and md.confirmation.p_value <= options.confirmation_level:
+    """The effects the model core names: those of its chosen model that the final block
+    confirms. The chosen model must forecast the block better than the calibration alone
+    (:meth:`Confirmation.passes` at the options' level); with several chosen effects, each must
+    also forecast it better beside the others (its own test, Holm's step-down over the chosen
+    effects at the same level)."""
+    level = options.confirmation_level
+    if not md.chosen or not md.confirmation.passes(level):
+        return ()
+    if not md.effect_confirmations:
         return md.chosen
-    return ()
+    kept: set[str] = set()
+    tests = sorted(md.effect_confirmations.items(), key=lambda kv: kv[1].p_value)
+    for k, (name, conf) in enumerate(tests):
+        if not conf.passes(level / (len(tests) - k)):
+            break  # Holm: the first test that fails stops the step-down
+        kept.add(name)
+    return tuple(e for e in md.chosen if e in kept)
+
+
+def unconfirmed(md: ModelDiagnosis, options: ModelOptions) -> tuple[str, ...]:
+    """The chosen effects that the final block did not confirm (:func:`model_named`)."""
+    named = model_named(md, options)
+    return tuple(e for e in md.chosen if e not in named)
+
+
+def _percent(x: float) -> str:
+    return f"{100.0 * x:.0f} %"
+
+
+def model_status(md: ModelDiagnosis, options: ModelOptions) -> str:
+    """The verdict's status in words, from the model core's own numbers: what it names and
+    with what probability; what it chose on the training span but the final block did not
+    confirm; which pairs the posterior cannot tell apart; and which candidates the calibration
+    mostly reproduces on this span (more than half of their prior field is a change of the 12
+    parameters), so that the data cannot separate them from it."""
+    named = model_named(md, options)
+    inc = md.inclusion()
+    conf = md.confirmation
+    before, after = conf.holdout_rms_before_nt, conf.holdout_rms_after_nt
+    block = f"{before:.1f} -> {after:.1f} nT, p {conf.p_value:.2g}"
+
+    def listed(names: Sequence[str]) -> str:
+        return ", ".join(f"{e} (probability {inc[e]:.2f})" for e in names)
+
+    left = unconfirmed(md, options)
+    parts = []
+    if named:
+        parts.append(
+            f"named by the model core: {listed(named)}; confirmed on the final block ({block})"
+        )
+        if left:
+            parts.append(
+                f"beside them, not confirmed on its own on the final block: {listed(left)}"
+            )
+    elif md.chosen and conf.passes(options.confirmation_level):
+        parts.append(
+            f"none named alone: the chosen model, {listed(md.chosen)}, forecasts the final block "
+            f"better together ({block}), but none of them does beside the others, so the final "
+            f"block cannot tell which of {', '.join(md.chosen)} carries the gain"
+        )
+    elif md.chosen:
+        parts.append(
+            f"none: the model chosen on the training span, {listed(md.chosen)}, does not "
+            f"forecast the final block better than the calibration alone ({block})"
+        )
+    else:
+        parts.append("none")
+    parts.extend(s["statement"] for s in splits(md, options.selection_probability))
+    mostly = sorted(
+        ((e, a) for e, a in md.absorbed.items() if a > 0.5 and e not in named),
+        key=lambda kv: -kv[1],
+    )
+    if mostly:
+        parts.append(
+            "on this span most of the field of "
+            + ", ".join(f"{e} ({_percent(a)})" for e, a in mostly)
+            + " is a change of the 12 calibration parameters: if present, they cannot be "
+            "separated from the calibration; what would decide: a prior calibration (orbitcal "
+            "diagnose --calibration CAL.json), a longer span, attitude diversity"
+        )
+    return "; ".join(parts)
 
 
 def splits(md: ModelDiagnosis, cutoff: float) -> list[dict[str, Any]]:
@@ -64,6 +148,8 @@ def model_section(md: ModelDiagnosis, options: ModelOptions) -> dict[str, Any]:
         "cross_validation": md.crossval.to_json(),
         "confirmed": bool(named),
         "named": list(named),
+        "not_confirmed": list(unconfirmed(md, options)),
+        "effect_confirmations": {e: c.to_json() for e, c in md.effect_confirmations.items()},
         "splits": splits(md, options.selection_probability),
         "absorbed_by_calibration_fraction": {e: _p(a) for e, a in md.absorbed.items()},
         "forms": dict(md.forms),
@@ -97,11 +183,7 @@ def with_model_keys(
                 entry["status"] = "selected" if entry["significant"] else "not significant"
         document["effects"].sort(key=lambda e: -e["probability"])
         document.setdefault("final", {})["effects"] = list(named)
-        document["verdict_status"] = (
-            "none"
-            if not named
-            else f"named by the model core, probability {md.probability(named[0]):.2f}"
-        )
+        document["verdict_status"] = model_status(md, options)
     document["verdict_probability"] = _p(md.probability(document["verdict"]))
     document["confirmation"] = md.confirmation.to_json()
     document["model"] = model_section(md, options)
