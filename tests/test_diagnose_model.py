@@ -306,7 +306,8 @@ def test_cross_validation_keeps_a_real_effect_and_withdraws_columns_that_do_not_
 
 
 def _confirmation(p: float, before: float, after: float) -> Confirmation:
-    return Confirmation(before, after, p, 3.0, 100)
+    """A confirmation under unit white noise: the whitened gain is the squared RMS's change."""
+    return Confirmation(before, after, p, 3.0, 100, 3.0 * (before**2 - after**2))
 
 
 def _diagnosis(
@@ -359,8 +360,13 @@ def test_each_chosen_effect_must_forecast_the_final_block_better_beside_the_othe
     # by p: a at 0.05 / 2, then b at 0.05 / 1: both pass
     assert model_named(md, opts) == ("a", "b")
     md = _diagnosis(("a", "b", "c"), good, {"a": good, "b": weak, "c": worse})
-    # ordered by p: c (fails: worse RMS) stops the step-down before a and b
-    assert model_named(md, opts) == ()
+    # c's test rejects first (p 1e-9 at 0.05 / 3) but its forecast is farther: c is not named,
+    # and the step-down goes on to a (0.05 / 2) and b (0.05 / 1)
+    assert model_named(md, opts) == ("a", "b")
+    md = _diagnosis(("a", "b", "c"), good, {"a": good, "b": _confirmation(0.9, 10, 9), "c": weak})
+    # a (1e-6) passes at 0.05 / 3; c (0.04) fails at 0.05 / 2 and stops the step-down: b (0.9) is
+    # never reached
+    assert model_named(md, opts) == ("a",)
     md = _diagnosis(("a", "b", "c"), good, {"a": good, "b": _confirmation(0.03, 10, 9), "c": weak})
     # a at 0.05/3, b 0.02 > 0.05/2 stops: only a
     assert model_named(md, opts) == ("a",)

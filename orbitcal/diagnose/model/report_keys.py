@@ -42,13 +42,15 @@ def model_named(md: ModelDiagnosis, options: ModelOptions) -> tuple[str, ...]:
         return ()
     if not md.effect_confirmations:
         return md.chosen
-    kept: set[str] = set()
+    rejected: set[str] = set()
     tests = sorted(md.effect_confirmations.items(), key=lambda kv: kv[1].p_value)
     for k, (name, conf) in enumerate(tests):
-        if not conf.passes(level / (len(tests) - k)):
-            break  # Holm: the first test that fails stops the step-down
-        kept.add(name)
-    return tuple(e for e in md.chosen if e in kept)
+        if not conf.rejects(level / (len(tests) - k)):
+            break  # Holm: the first p-value above its level stops the step-down
+        rejected.add(name)
+    # an effect whose test rejects but whose forecast is not closer is not named, and does not
+    # stop the others' step-down (the order is the p-values')
+    return tuple(e for e in md.chosen if e in rejected and md.effect_confirmations[e].closer())
 
 
 def unconfirmed(md: ModelDiagnosis, options: ModelOptions) -> tuple[str, ...]:
