@@ -186,11 +186,13 @@ def _refined_forms(
     starts: IntArray,
     forms: Sequence[Form],
     options: ModelOptions,
-) -> list[Form]:
+) -> tuple[list[Form], list[Form], FloatArray]:
     """``forms`` with each effect's best form (by evidence under unit noise) refined where its
     design block offers a refinement (a drift's step time, a storm's minimum: a grid of times,
     then halving): the refinement's forms are added, and every form of that effect is paid for
-    by the number of forms tried (``n_forms``, the Bonferroni bound over the search).
+    by the number of forms tried (``n_forms``, the Bonferroni bound over the search). Also each
+    effect's best form so refined (columns numbered as in the forms returned) and the
+    calibration's least-squares value.
 
     Without it the model core chose among the grid's forms only: our simulator's 30 nT step fell
     350 s from the nearest of 17 grid times, the box it left was taken as noise, and the drift
@@ -201,6 +203,7 @@ def _refined_forms(
     cal_mean = _beta(project(apart), apart.ce, apart.cy, np.zeros(width))
     aug = _augmented(apart, cal_mean)
     out = list(forms)
+    bests = []
     for best in _best_forms(aug, forms):
         current, tried = best, []
         while current.block.refine is not None:
@@ -215,6 +218,7 @@ def _refined_forms(
             tried += new
             current = new[int(np.argmax(evidence))]
         if not tried:
+            bests.append(best)
             continue
         n_forms = best.n_forms + len(tried)
         out = [
@@ -225,8 +229,11 @@ def _refined_forms(
                 current, cols=slice(width, width + current.block.width), n_forms=n_forms
             )
         )
+        bests.append(out[-1])
         width += current.block.width
-    return out
+    by_effect = {f.effect: f for f in out}  # the n_forms paid, as in ``out``
+    bests = [dataclasses.replace(b, n_forms=by_effect[b.effect].n_forms) for b in bests]
+    return out, bests, cal_mean
 
 
 def _evidence_or_inf(aug: Augmented, form: Form) -> float:
@@ -239,33 +246,35 @@ def _evidence_or_inf(aug: Augmented, form: Form) -> float:
 
 
 def _noise_candidates(
-    data: DiagnosisData, index: IntArray, starts: IntArray, forms: Sequence[Form], max_order: int
-) -> tuple[list[tuple[AxisNoise, ...]], FloatArray]:
-    """Two noise models of the training residual -- of the calibration alone, and of the
-    encompassing model (every candidate in the form of greatest evidence under unit noise, at
-    its posterior mean: what no candidate explains) -- and the calibration's least-squares value.
+    data: DiagnosisData,
+    index: IntArray,
+    starts: IntArray,
+    forms: Sequence[Form],
+    best: Sequence[Form],
+    beta_ls: FloatArray,
+    max_order: int,
+) -> list[tuple[AxisNoise, ...]]:
+    """Two noise models of the training residual -- of the calibration alone (at its
+    least-squares value ``beta_ls``), and of the encompassing model (every candidate in its
+    ``best`` form under unit noise, at its posterior mean: what no candidate explains).
 
     Each candidate's *best* form, not its first: a drift's first form is a trend, and a drift
     with a step (our simulator's) left the step in the encompassing residual, whose noise model
     then became a random-walk offset as the calibration's did, and the drift, whitened away as
     noise, got probability 0 with 18 nT left on the final block."""
-    unit = (_UNIT,) * 3
-    apart = whitened_grams(data, index, starts, forms, [unit], forms_apart=True)[0]
-    width = max((f.cols.stop for f in forms), default=0)
-    zero = np.zeros(width)
-    beta_ls = _beta(project(apart), apart.ce, apart.cy, zero)
+    zero = np.zeros(max((f.cols.stop for f in forms), default=0))
     out = [fit_noise(apply_model(data, index, forms, beta_ls, zero), starts, max_order=max_order)]
-    if forms:
-        best = _compact(_best_forms(_augmented(apart, beta_ls), forms))
-        gram = whitened_gram(data, index, starts, best, unit)
+    if best:
+        compact = _compact(best)
+        gram = whitened_gram(data, index, starts, compact, (_UNIT,) * 3)
         proj = project(gram)
-        mean = np.concatenate([f.prior_mean for f in best])
-        sd = np.concatenate([f.prior_sd for f in best])
+        mean = np.concatenate([f.prior_mean for f in compact])
+        sd = np.concatenate([f.prior_sd for f in compact])
         _, theta = log_evidence(proj, np.arange(mean.size, dtype=np.intp), mean, sd)
         beta = _beta(proj, gram.ce, gram.cy, theta)
-        residual = apply_model(data, index, best, beta, theta)
+        residual = apply_model(data, index, compact, beta, theta)
         out.append(fit_noise(residual, starts, max_order=max_order))
-    return out, beta_ls
+    return out
 
 
 def _augmented(gram: Gram, cal_mean: FloatArray) -> Augmented:
@@ -345,8 +354,10 @@ def model_diagnosis(
     index = estimation_samples(train)
     step = int(np.median(np.diff(index))) if index.size > 1 else 1
     starts = run_starts(data, index, step)
-    forms = _refined_forms(data, index, starts, forms, options)
-    noises, cal_mean = _noise_candidates(data, index, starts, forms, options.noise_max_order)
+    forms, best_unit, cal_mean = _refined_forms(data, index, starts, forms, options)
+    noises = _noise_candidates(
+        data, index, starts, forms, best_unit, cal_mean, options.noise_max_order
+    )
     skip = noise_skip(options.noise_max_order)
     # each effect's form chosen under each noise model from the forms' own products, then the
     # whole Gram matrix of the chosen forms alone (the products between forms of one effect,
