@@ -308,7 +308,7 @@ def _write(
         "worlds per noise kind",
         "",
         "Size: the most probable candidate confirmed on the final block whatever its probability "
-        "(the test rejects and the forecast is closer, whitened and in RMS: what names an effect; "
+        "(the test rejects and the forecast is closer, a lower RMS: what names an effect; "
         "target 0.5-2 x the level); the test alone: its rejection rate. False alarms: worlds "
         "where the procedure names an effect.",
         "",

@@ -374,6 +374,9 @@ def test_each_chosen_effect_must_forecast_the_final_block_better_beside_the_othe
     assert "beside them, not confirmed on its own" in model_status(md, opts)
     md = _diagnosis(("a",), worse, {})
     assert model_named(md, opts) == ()
+    # equally sure (0.90 each): the one that shrinks the block more beside the other first
+    md = _diagnosis(("a", "b"), good, {"a": _confirmation(1e-6, 10, 9), "b": good})
+    assert model_named(md, opts) == ("b", "a")
 
 
 def test_the_status_says_why_nothing_is_named() -> None:
