@@ -151,3 +151,16 @@ def test_an_engine_the_checkout_cannot_run_is_refused_with_the_reason() -> None:
         with pytest.raises(SystemExit, match="DiagnosisOptions has no field 'engine'"):
             common.check_engines(["rules", "model"])
         assert engine_cli.main(["model", "diagnose", "x.csv", "--out", "y.json"]) == 2
+
+
+def test_the_readme_quotes_the_validation_page() -> None:
+    """The README's row of the two engines is the validation page's figures, never typed."""
+    root = HERE.parents[1]
+    page = (root / "benchmarks" / "results" / "diagnose_engines_validation.md").read_text()
+    row = next(
+        line for line in (root / "README.md").read_text().splitlines()
+        if line.startswith("| the two diagnosis engines side by side")
+    )  # fmt: skip
+    figures = tables.readme_figures(page)
+    assert figures.startswith("independent worlds: recall ") and " / " in figures
+    assert figures in row, (figures, row)

@@ -389,6 +389,39 @@ def engines_page(runs: list[dict], label: str) -> str:
     return "\n".join(lines)
 
 
+#: The README row's figures: (label in the README, the page's row label), first of each on the page.
+README_FIGURES = (
+    ("independent worlds: recall", "| recall (injected effects named significant) |"),
+    ("spurious worlds", "| worlds with a spurious effect |"),
+    ("verdict among the injected", "| verdict among the injected |"),
+    ("null false alarms", "| null worlds with a false alarm |"),
+    ("storm pass right or honest", "| right or honest |"),
+    ("our simulator's 240 worlds top-1", "| top-1 verdict, all worlds (one effect or none) |"),
+    ("compound recall", "| recall of the observable injected effects |"),
+    ("compound spurious worlds", "| worlds with a spurious effect |"),
+)
+
+
+def readme_figures(page: str) -> str:
+    """The README row's figures from an ``--engines`` page: rules / model, per panel, each the
+    first table row of that label after the panel's heading (the figures are never typed)."""
+    out = []
+    lines = page.splitlines()
+    start = 0
+    for name, label in README_FIGURES:
+        if name.startswith("compound"):
+            start = next(
+                i for i, ln in enumerate(lines) if ln.startswith("## Our simulator: compound")
+            )
+        elif name.startswith("our simulator"):
+            start = next(i for i, ln in enumerate(lines) if ln.startswith("## Our simulator: 240"))
+        line = next(ln for ln in lines[start:] if ln.startswith(label))
+        cells = [c.strip() for c in line.strip("|").split("|")][1:3]
+        pct = [c.rsplit("=", 1)[-1].strip().removesuffix("%").strip() for c in cells]
+        out.append(f"{name} {pct[0]} / {pct[1]} %")
+    return "; ".join(out)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--real-summary", nargs="+", type=Path, default=[])
