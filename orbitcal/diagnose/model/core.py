@@ -231,8 +231,6 @@ def _refined_forms(
         )
         bests.append(out[-1])
         width += current.block.width
-    by_effect = {f.effect: f for f in out}  # the n_forms paid, as in ``out``
-    bests = [dataclasses.replace(b, n_forms=by_effect[b.effect].n_forms) for b in bests]
     return out, bests, cal_mean
 
 
@@ -393,19 +391,21 @@ def model_diagnosis(
     h_index = np.flatnonzero(holdout)
     h_starts = run_starts(data, h_index, 1)
 
-    def forecast_error(names: Sequence[str]) -> FloatArray:
-        """The final block's error of the model ``names`` fitted on the training span."""
+    def fitted(names: Sequence[str]) -> tuple[FloatArray, list[Form], FloatArray]:
+        """The model ``names`` fitted on the training span: its parameters (calibration first),
+        its forms, and its effect parameters placed in the Gram's columns."""
         params = post.thetas[post.models.index(tuple(sorted(post.effects.index(e) for e in names)))]
         model_forms = [by_effect[e] for e in sorted(names, key=post.effects.index)]
-        return apply_model(
-            data, h_index, forms, params[:12], _theta_full(forms, model_forms, params[12:])
-        )
+        return params, model_forms, _theta_full(forms, model_forms, params[12:])
+
+    def forecast_error(names: Sequence[str]) -> FloatArray:
+        """The final block's error of the model ``names`` fitted on the training span."""
+        params, _, full = fitted(names)
+        return apply_model(data, h_index, forms, params[:12], full)
 
     e_model = forecast_error(chosen)
     e_base = forecast_error(()) if chosen else e_model
-    model_key = tuple(sorted(post.effects.index(e) for e in chosen))
-    params = post.thetas[post.models.index(model_key)]
-    chosen_forms = [by_effect[e] for e in sorted(chosen, key=post.effects.index)]
+    params, chosen_forms, chosen_full = fitted(chosen)
     # whitened by the noise model of the chosen model's own training residual: what is left
     # when the chosen effects are right (and, when they are not there, about the calibration's
     # residual). The calibration's residual holds any effect present, which makes a slow one
@@ -413,9 +413,7 @@ def model_diagnosis(
     # removes: the drift of our simulator forecast 6.1 -> 2.0 nT at p 0.81.
     test_noise = (
         fit_noise(
-            apply_model(
-                data, index, forms, params[:12], _theta_full(forms, chosen_forms, params[12:])
-            ),
+            apply_model(data, index, forms, params[:12], chosen_full),
             starts,
             max_order=options.noise_max_order,
         )

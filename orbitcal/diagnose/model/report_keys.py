@@ -51,16 +51,17 @@ def model_named(md: ModelDiagnosis, options: ModelOptions) -> tuple[str, ...]:
     # an effect whose test rejects but whose forecast is not closer is not named, and does not
     # stop the others' step-down (the order is the p-values')
     named = [e for e in md.chosen if e in rejected and md.effect_confirmations[e].closer()]
-    return tuple(sorted(named, key=lambda e: _verdict_key(md, e)))
+    inc = md.inclusion()
+    return tuple(sorted(named, key=lambda e: _verdict_key(md, inc[e], e)))
 
 
-def _verdict_key(md: ModelDiagnosis, effect: str) -> tuple[float, float]:
+def _verdict_key(md: ModelDiagnosis, probability: float, effect: str) -> tuple[float, float]:
     """Named effects in order: the surer first (probability to the report's two decimals), and
     among equally sure ones the one whose own test shrank the final block most beside the
     others (three effects at probability 1.00 were otherwise in the order of the catalogue)."""
     conf = md.effect_confirmations.get(effect)
     shrink = conf.holdout_rms_before_nt - conf.holdout_rms_after_nt if conf else 0.0
-    return (-round(md.inclusion()[effect], 2), -shrink)
+    return (-round(probability, 2), -shrink)
 
 
 def unconfirmed(md: ModelDiagnosis, options: ModelOptions) -> tuple[str, ...]:
