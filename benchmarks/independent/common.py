@@ -183,12 +183,13 @@ def run_cli(
     return json.loads(out.read_text())
 
 
-def git_head() -> str:
+def git_head(paths: tuple[str, ...] = ("orbitcal",)) -> str:
+    """The short commit, ``+dirty`` when ``paths`` have uncommitted changes."""
     out = subprocess.run(
         ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=REPO
     )
     dirty = subprocess.run(
-        ["git", "status", "--porcelain", "orbitcal"], capture_output=True, text=True, cwd=REPO
+        ["git", "status", "--porcelain", *paths], capture_output=True, text=True, cwd=REPO
     )
     return out.stdout.strip() + ("+dirty" if dirty.stdout.strip() else "")
 

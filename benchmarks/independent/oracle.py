@@ -13,11 +13,30 @@ blocks are the later 30 % of the samples).
 An effect that is not observable in this sense -- a sensor temperature that settles before the
 held-out blocks begin, a time-tag error under nadir pointing whose field the calibration's
 matrix absorbs -- leaves no gap for any diagnosis to name, and a miss of it is counted apart.
+
+Runs written without ``run_worlds.py --oracle`` are scored afterwards, in place::
+
+    python benchmarks/independent/oracle.py RUN.json.gz [RUN2.json.gz ...] [--jobs 1]
+
+Each effect world of each run (a row with effects injected and no ``oracle`` yet) gets its
+``oracle``; the worlds are remade from the run's ``--seed`` and the row's world index, as
+``run_worlds.py`` made them (``default_rng([seed, world])``), and a row is scored only when the
+world without any effect has the row's sample count and truth (the same draws). The per-engine
+summaries are recomputed (:func:`run_worlds.summarise`) and the run records when and at which
+commit this was done (``oracle_added``); the engines' scores of each row are kept as they were.
 """
 
 from __future__ import annotations
 
+import argparse
+import json
+import re
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+
 import numpy as np
+from common import REPO, git_head, read_json, write_json
 from world import (
     TleSet,
     World,
@@ -59,6 +78,14 @@ def observability(
     """For each of ``effects``: the held-out RMS of the world with only it, of the world with
     none, and whether it is observable. ``seed``, ``noise`` and ``small_unmodelled`` as the
     world was made with."""
+    return _observability(seed, effects, noise, small_unmodelled)[0]
+
+
+def _observability(
+    seed: list[int], effects: list[str], noise: str, small_unmodelled: bool
+) -> tuple[dict[str, dict], World]:
+    """:func:`observability` and the world without any of ``effects`` (to check that it is the
+    world that was diagnosed)."""
     every = frozenset(effects)
 
     def world(exclude: frozenset[str]) -> tuple[World, TleSet]:
@@ -82,4 +109,108 @@ def observability(
             "holdout_rms_none_nt": round(floor, 4),
             "observable": bool(rms >= floor * (1.0 + OBSERVABLE_GAIN)),
         }
-    return out
+    return out, none
+
+
+def _score_row(seed: int, row: dict) -> tuple[int, dict | None, str, float]:
+    """(world, its ``oracle`` or None, what was checked, seconds) for one row of a run."""
+    t0 = time.time()
+    out, none = _observability(
+        [seed, row["world"]], row["injected"], row["noise"], row["small_unmodelled"]
+    )
+    samples = int(none.t_unix_s.size)
+    # the truth is recorded whatever is excluded: the same draws give the same truth
+    same_truth = json.loads(json.dumps(none.truth, default=float)) == row["truth"]
+    check = f"samples {samples} (row {row['samples']}), truth {'same' if same_truth else 'DIFFERS'}"
+    ok = samples == row["samples"] and same_truth
+    return row["world"], (out if ok else None), check, time.time() - t0
+
+
+def _shown(path: Path) -> str:
+    """``path`` from the repository's root when it is inside it."""
+    try:
+        return str(path.resolve().relative_to(REPO))
+    except ValueError:
+        return str(path)
+
+
+def add_to_run(path: Path, jobs: int = 1, only: list[int] | None = None) -> int:
+    """Score the effect worlds of the run at ``path`` that have no ``oracle`` yet (of ``only``
+    when given), recompute its per-engine summaries and write it back; returns the number of
+    worlds that could not be scored (not the world that was diagnosed)."""
+    from run_worlds import summarise  # not at the top: run_worlds.py --oracle imports this
+
+    run = read_json(path)
+    m = re.search(r"--seed (\d+)", run["command"])
+    if m is None:
+        raise SystemExit(f"{path}: no --seed in its command {run['command']!r}")
+    seed = int(m.group(1))
+    todo = [
+        r
+        for r in run["rows"]
+        if r["injected"] and "oracle" not in r and (only is None or r["world"] in only)
+    ]
+    by_world = {r["world"]: r for r in todo}
+    print(f"{path.name}: seed {seed}, {len(todo)} effect worlds to score", flush=True)
+    failed = 0
+
+    def done(world: int, oracle: dict | None, check: str, wall: float) -> None:
+        nonlocal failed
+        row = by_world[world]
+        if oracle is None:
+            failed += 1
+        else:
+            row["oracle"] = oracle
+        seen = [e for e, o in (oracle or {}).items() if o["observable"]]
+        print(
+            json.dumps(
+                {"run": path.name, "world": world, "injected": row["injected"],
+                 "observable": seen if oracle is not None else "NOT SCORED", "check": check,
+                 "wall_s": round(wall, 1)}
+            ),
+            flush=True,
+        )  # fmt: skip
+
+    if jobs <= 1:
+        for r in todo:
+            done(*_score_row(seed, r))
+    else:
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            futures = [pool.submit(_score_row, seed, r) for r in todo]
+            for f in as_completed(futures):
+                done(*f.result())
+    if todo:
+        rows = run["rows"]  # the rows scored above are these rows
+        run["engines"] = {e: summarise(rows, e) for e in run["engines"]}
+        added: dict = {
+            # the oracle runs benchmarks/independent/ only (no orbitcal)
+            "commit": git_head(("benchmarks/independent",)),
+            "command": f"python benchmarks/independent/oracle.py {_shown(path)}"
+            + (f" --only {' '.join(map(str, only))}" if only else ""),
+            "worlds": sorted(w for w, r in by_world.items() if "oracle" in r),
+        }
+        if "oracle_added" in run:  # a second pass (worlds left unscored by the first)
+            added["earlier"] = run["oracle_added"]
+        # with the run's other keys, before the rows
+        run = {k: v for k, v in run.items() if k not in ("rows", "oracle_added")}
+        run |= {"oracle_added": added, "rows": rows}
+        write_json(path, run)
+    return failed
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description="Add the observability oracle to run_worlds.py runs")
+    ap.add_argument("runs", nargs="+", type=Path, help="RUN.json or RUN.json.gz, in place")
+    ap.add_argument("--jobs", type=int, default=1, help="worlds scored at once")
+    ap.add_argument("--only", type=int, nargs="+", default=None, help="these worlds only")
+    args = ap.parse_args(argv)
+    failed = 0
+    for path in args.runs:
+        failed += add_to_run(path, args.jobs, args.only)
+    if failed:
+        print(f"{failed} worlds not scored: not the world of their row", flush=True)
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

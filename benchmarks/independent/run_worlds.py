@@ -140,9 +140,13 @@ def summarise(rows: list[dict], engine: str | None = None) -> dict:
     by_effect: dict[str, list[int]] = {}
     for r in comp:
         for e in r["injected"]:
-            by_effect.setdefault(e, [0, 0])
+            by_effect.setdefault(e, [0, 0, 0, 0])
             by_effect[e][0] += e in r["found"]
             by_effect[e][1] += 1
+            if r.get("oracle", {}).get(e, {}).get("observable"):
+                by_effect[e][2] += 1
+                by_effect[e][3] += e in r["found"]
+    scored = all("oracle" in r for r in comp)
     pairs = [
         (p, name in r["injected"]) for r in comp + null for name, p in r["probabilities"].items()
     ] if all("probabilities" in r for r in comp + null) else []  # fmt: skip
@@ -150,8 +154,13 @@ def summarise(rows: list[dict], engine: str | None = None) -> dict:
         "compound_worlds": len(comp),
         "injected_effects": n_inj,
         "recall": sum(len(r["found"]) for r in comp) / max(n_inj, 1),
-        "recall_by_effect": {e: {"found": f, "injected": n} for e, (f, n) in by_effect.items()},
-        "observable_effects": len(observable) if all("oracle" in r for r in comp) else None,
+        # with the oracle in every world: how many were observable, and found of those
+        "recall_by_effect": {
+            e: {"found": f, "injected": n}
+            | ({"observable": o, "found_observable": fo} if scored else {})
+            for e, (f, n, o, fo) in by_effect.items()
+        },
+        "observable_effects": len(observable) if scored else None,
         "recall_observable": (
             sum(e in r["found"] for e, r in observable) / max(len(observable), 1)
             if observable

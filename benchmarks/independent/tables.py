@@ -225,6 +225,22 @@ def _engines_worlds(runs: list[dict]) -> list[str]:
     line("effect worlds", lambda e: str(s[e]["compound_worlds"]))
     line("recall (injected effects named significant)", share("recall", "injected_effects"))
     line("recall counting named twins", share("recall_with_twins", "injected_effects"))
+    # the observability oracle (oracle.py): only when every effect world has it
+    scored = all(s[e]["observable_effects"] is not None for e in engines)
+    if scored:
+        after = sorted({run["oracle_added"]["commit"] for run in runs if "oracle_added" in run})
+        when = f", scored after the run at {', '.join(after)}" if after else ""
+        line(
+            f"observable injected effects (oracle.py{when})",
+            lambda e: _cell(s[e]["observable_effects"], s[e]["injected_effects"]),
+        )
+        line(
+            "recall of the observable injected effects",
+            lambda e: _cell(
+                sum(v["found_observable"] for v in s[e]["recall_by_effect"].values()),
+                s[e]["observable_effects"],
+            ),
+        )
     line("worlds with a spurious effect", share("worlds_with_spurious", "compound_worlds"))
     line("verdict among the injected", share("verdict_among_injected", "compound_worlds"))
     line("null worlds with a false alarm", share("null_false_alarm_rate", "null_worlds"))
@@ -236,14 +252,33 @@ def _engines_worlds(runs: list[dict]) -> list[str]:
         ),
     )
     line("reports in error", lambda e: str(s[e]["errors"]))
-    out += ["", "Recall by effect:", "", "| effect | " + " | ".join(engines) + " |", rule]
+    head_e = "| effect | " + " | ".join(engines) + (" | observable |" if scored else " |")
+    out += ["", "Recall by effect:", "", head_e, rule + ("---:|" if scored else "")]
     names = sorted({n for e in engines for n in s[e]["recall_by_effect"]})
     for name in names:
         cells = []
         for e in engines:
             v = s[e]["recall_by_effect"].get(name)
             cells.append(f"{v['found']} of {v['injected']}" if v else "-")
+        if scored:
+            # of the injections each engine's report scored (the same unless one was in error)
+            seen = [
+                f"{v['observable']} of {v['injected']}"
+                for e in engines
+                if (v := s[e]["recall_by_effect"].get(name))
+            ]
+            cells.append(" / ".join(dict.fromkeys(seen)))
         out.append(f"| {name} | " + " | ".join(cells) + " |")
+    if scored:
+        missed = []
+        for e in engines:
+            short = [
+                f"{n} {v['observable'] - v['found_observable']} of {v['observable']}"
+                for n, v in sorted(s[e]["recall_by_effect"].items())
+                if v["found_observable"] < v["observable"]
+            ]
+            missed.append(f"{e}: {', '.join(short) or 'none'}")
+        out += ["", "Observable injected effects not named significant: " + "; ".join(missed) + "."]
     out += ["", "False alarms of the null worlds by noise kind:", ""]
     out += ["| noise | " + " | ".join(engines) + " |", rule]
     kinds = sorted({k for e in engines for k in s[e]["null_by_noise_kind"]})
