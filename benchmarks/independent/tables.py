@@ -204,6 +204,12 @@ def _cell(n: int, d: int) -> str:
     return f"{n} of {d} = {100.0 * n / d:.1f} %" if d else "-"
 
 
+def _oracle_commits(added: dict | None) -> list[str]:
+    """The commits at which ``oracle.py`` scored a run after it (a second pass keeps the first
+    as ``earlier``)."""
+    return [] if added is None else [added["commit"], *_oracle_commits(added.get("earlier"))]
+
+
 def _engines_worlds(runs: list[dict]) -> list[str]:
     """The independent-generator panel, one column per engine, the worlds of all ``runs``."""
     from run_worlds import summarise
@@ -228,7 +234,7 @@ def _engines_worlds(runs: list[dict]) -> list[str]:
     # the observability oracle (oracle.py): only when every effect world has it
     scored = all(s[e]["observable_effects"] is not None for e in engines)
     if scored:
-        after = sorted({run["oracle_added"]["commit"] for run in runs if "oracle_added" in run})
+        after = sorted({c for run in runs for c in _oracle_commits(run.get("oracle_added"))})
         when = f", scored after the run at {', '.join(after)}" if after else ""
         line(
             f"observable injected effects (oracle.py{when})",
