@@ -517,7 +517,7 @@ CATALOGUE: tuple[Effect, ...] = (
             ("quadratic_", ParamRange(-500.0, 500.0, _NONLINEARITY, 0.0, 250.0)),
             ("cubic_", ParamRange(-500.0, 500.0, _NONLINEARITY, 0.0, 250.0)),
             # imperfect-model columns: cross-axis quadratic terms
-            ("cross_", ParamRange(-500.0, 500.0, _NONLINEARITY, 0.0, 50.0)),
+            ("cross_", ParamRange(-500.0, 500.0, _NONLINEARITY, 0.0, 20.0)),
         ),
         imperfect=imperfect_columns.cross_nonlinearity,
     ),
