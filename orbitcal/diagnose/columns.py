@@ -27,6 +27,7 @@ __all__ = [
     "Factor",
     "FunctionColumns",
     "Index",
+    "JoinedColumns",
     "PerAxisColumns",
     "ScaledVectorColumns",
     "chunk_slices",
@@ -163,3 +164,18 @@ class FunctionColumns:
 
     def __call__(self, index: Index) -> FloatArray:
         return np.asarray(self.fn(index))
+
+
+class JoinedColumns:
+    """The columns of several blocks side by side: ``G[index] = [G_1[index] | G_2[index] ...]``
+    (each part a function of the samples asked for, e.g. a design block's ``rows``)."""
+
+    def __init__(
+        self, n: int, parts: Sequence[Callable[[Index], FloatArray]], widths: Sequence[int]
+    ):
+        self.n = int(n)
+        self.parts = tuple(parts)
+        self.width = int(sum(widths))
+
+    def __call__(self, index: Index) -> FloatArray:
+        return np.concatenate([part(index) for part in self.parts], axis=2)

@@ -384,6 +384,17 @@ class DiagnosisData:
         return np.stack([e1, e2], axis=1)
 
     @cached_property
+    def sm_equatorial_body(self) -> FloatArray | None:
+        """The SM x and y axes (the dipole equator's sunward and duskward directions) in the
+        body frame, shape (N, 2, 3) [-] (None without the Sun's direction)."""
+        if self.sun_body is None:
+            return None
+        z = self.dipole_axis_body
+        x = self.sun_body - np.sum(self.sun_body * z, axis=1, keepdims=True) * z
+        x /= np.maximum(np.linalg.norm(x, axis=1, keepdims=True), 1e-12)
+        return np.stack([x, np.cross(z, x)], axis=1)
+
+    @cached_property
     def mlt_angle_rad(self) -> FloatArray | None:
         """Magnetic local time angle [rad]: 0 at magnetic noon, +pi/2 at dusk (None without Sun).
 

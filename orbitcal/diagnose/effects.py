@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from orbitcal.arrays import BoolArray, FloatArray
+from orbitcal.diagnose import imperfect as imperfect_columns
 from orbitcal.diagnose.attitude_scan import design_attitude
 from orbitcal.diagnose.bounds import (
     FREE,
@@ -137,6 +138,13 @@ class Effect:
         Parameters whose range widens with the element set's age at the data (the orbit
         error's), by prefix: the power of the age they widen with beyond two days, and the
         least half-width per day of age (:func:`orbitcal.diagnose.bounds.aged_range`).
+    imperfect : callable, optional
+        ``imperfect(data, train) -> DesignBlock | None``: columns of what the effect's own
+        forms leave out when it is real but not exactly as written (the external field's
+        components across the dipole axis), appended to each of its forms by the model core
+        (:mod:`orbitcal.diagnose.model`) under the shrinkage prior of their ``param_ranges``;
+        an effect present in a form the catalogue does not write then leaves less for the
+        other effects' columns to take.
     """
 
     name: str
@@ -152,6 +160,7 @@ class Effect:
     param_ranges: PrefixRanges = ()
     consistency: Callable[[list[str], list[float], list[float]], list[str]] | None = None
     age_growth: tuple[tuple[str, int, float], ...] = ()
+    imperfect: DesignFn | None = None
 
     @property
     def rescanned_beside_others(self) -> bool:
@@ -309,7 +318,24 @@ CATALOGUE: tuple[Effect, ...] = (
             # fluxgate offset and sensitivity thermal coefficients
             ("offset_", symmetric(10.0, "fluxgate offset thermal coefficient, <= 10 nT/degC")),
             *((f"scale_{a}_per_degc", symmetric(25.0, _SENSITIVITY_THERMAL)) for a in "xyz"),
+            # imperfect-model columns (shrinkage priors): a thermistor that lags the sensor by
+            # up to ~10 min (the offset coefficient times the lag), a quadratic coefficient
+            (
+                "thermal_lag_",
+                ParamRange(
+                    -20.0,
+                    20.0,
+                    "offset coefficient x thermistor lag / 300 s: <= 10 nT/degC x 2",
+                    0.0,
+                    3.0,
+                ),
+            ),
+            (
+                "thermal_quadratic_",
+                ParamRange(-1.0, 1.0, "quadratic offset coefficient, <= 1 nT/degC^2", 0.0, 0.1),
+            ),
         ),
+        imperfect=imperfect_columns.temperature_lag,
     ),
     Effect(
         "magnetorquer",
@@ -327,7 +353,16 @@ CATALOGUE: tuple[Effect, ...] = (
             ),
             # the dipole law 2 mu0 m / (4 pi d^3) at d >= 0.27 m
             ("coupling_", symmetric(1.0e4, "dipole field of 1 A m^2 at >= 0.27 m from the sensor")),
+            # imperfect-model columns: the coupling times lag / reference lag (a coil's field
+            # lags its command by inductance and eddy currents, seconds)
+            (
+                "lag_coupling_",
+                ParamRange(
+                    -1.0e4, 1.0e4, "coupling x lag / 10 s: the coupling's range", 0.0, 100.0
+                ),
+            ),
         ),
+        imperfect=imperfect_columns.torquer_lag,
     ),
     Effect(
         "time_offset",
@@ -347,7 +382,13 @@ CATALOGUE: tuple[Effect, ...] = (
                 ParamRange(0.0, 25.0, "second order of the same shift: 0 <= dt^2 <= 25"),
             ),
             ("dt_s", symmetric(5.0, "time-tag error of a synchronised on-board clock, <= 5 s")),
+            # imperfect-model column: a clock drifting between synchronisations (TCXO 1-10 ppm)
+            (
+                "dt_rate_s_per_day",
+                ParamRange(-10.0, 10.0, "clock drift <= 100 ppm (10 s/day)", 0.0, 1.0),
+            ),
         ),
+        imperfect=imperfect_columns.clock_drift,
         consistency=time_shift_consistency,
     ),
     Effect(
@@ -404,8 +445,31 @@ CATALOGUE: tuple[Effect, ...] = (
                 "rc_model_scale",
                 ParamRange(0.2, 3.0, "RC-driven model amplitude, positive, near 1", 1.0, 0.5),
             ),
+            (
+                "asymmetric_",
+                ParamRange(
+                    -500.0,
+                    500.0,
+                    "ring current's local-time asymmetry (partial ring current): ASY-H up to"
+                    " ~200 nT in great storms, a few nT when quiet",
+                    0.0,
+                    100.0,
+                ),
+            ),
+            (
+                "across_dipole_sm_",
+                ParamRange(
+                    -500.0,
+                    500.0,
+                    "external field across the dipole axis (partial ring current, tail):"
+                    " ASY-H up to ~200 nT in great storms, a few nT when quiet",
+                    0.0,
+                    100.0,
+                ),
+            ),
         ),
         consistency=storm_consistency,
+        imperfect=imperfect_columns.external_asymmetry,
     ),
     Effect(
         "crustal_field",
@@ -452,7 +516,10 @@ CATALOGUE: tuple[Effect, ...] = (
             # at 5e4 nT
             ("quadratic_", ParamRange(-500.0, 500.0, _NONLINEARITY, 0.0, 250.0)),
             ("cubic_", ParamRange(-500.0, 500.0, _NONLINEARITY, 0.0, 250.0)),
+            # imperfect-model columns: cross-axis quadratic terms
+            ("cross_", ParamRange(-500.0, 500.0, _NONLINEARITY, 0.0, 20.0)),
         ),
+        imperfect=imperfect_columns.cross_nonlinearity,
     ),
     Effect(
         "orbit_error",

@@ -21,6 +21,7 @@ import numpy as np
 
 from orbitcal.arrays import BoolArray, FloatArray
 from orbitcal.diagnose.blocked import estimation_samples
+from orbitcal.diagnose.columns import JoinedColumns
 from orbitcal.diagnose.data import DiagnosisData
 from orbitcal.diagnose.design import DesignBlock
 from orbitcal.diagnose.effects import CATALOGUE, Effect
@@ -123,13 +124,34 @@ def _fill_sd(block: DesignBlock, sd: FloatArray, data: DiagnosisData) -> FloatAr
     return np.where(np.isfinite(sd), sd, UNBOUNDED_FIELD_NT / np.maximum(rms, 1e-12))
 
 
+def with_imperfect(block: DesignBlock, extra: DesignBlock | None) -> DesignBlock:
+    """``block`` with an effect's imperfect-model columns ``extra`` after its own (and so every
+    form its refinement makes); ``block`` itself without them."""
+    if extra is None:
+        return block
+    refine = block.refine
+
+    def refined() -> list[DesignBlock]:
+        assert refine is not None
+        return [with_imperfect(b, extra) for b in refine()]
+
+    return dataclasses.replace(
+        block,
+        source=JoinedColumns(block.n, [block.rows, extra.rows], [block.width, extra.width]),
+        names=[*block.names, *extra.names],
+        alternatives=(),
+        refine=None if refine is None else refined,
+    )
+
+
 def candidate_forms(
     data: DiagnosisData,
     train: BoolArray,
     options: ModelOptions,
     catalogue: Sequence[Effect] = CATALOGUE,
 ) -> list[Form]:
-    """Every form of every candidate whose witness is in the data, with its columns and prior."""
+    """Every form of every candidate whose witness is in the data, with its columns and prior
+    (each with its effect's imperfect-model columns, :attr:`Effect.imperfect`)."""
     forms: list[Form] = []
     col = 0
     for eff in catalogue:
@@ -138,7 +160,10 @@ def candidate_forms(
             continue
         if not block.all_finite():  # as the rules engine asks; a form with non-finite
             continue  # columns among the alternatives loses the choice (_best_forms)
-        blocks = [block, *block.alternatives]
+        extra = eff.imperfect(data, train) if eff.imperfect is not None else None
+        if extra is not None and not extra.all_finite():
+            extra = None
+        blocks = [with_imperfect(b, extra) for b in [block, *block.alternatives]]
         for b in blocks:
             mean, sd = group_prior(b, options.prior_sd_fraction)
             sd = _fill_sd(b, sd, data)
