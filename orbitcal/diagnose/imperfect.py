@@ -33,13 +33,8 @@ from scipy.signal import lfilter
 
 from orbitcal.arrays import BoolArray, FloatArray
 from orbitcal.diagnose.columns import Index, PerAxisColumns, ScaledVectorColumns
-from orbitcal.diagnose.data import (
-    FIELD_SCALE_NT,
-    SECONDS_PER_DAY,
-    DiagnosisData,
-    contiguous_runs,
-)
-from orbitcal.diagnose.design import DesignBlock
+from orbitcal.diagnose.data import FIELD_SCALE_NT, DiagnosisData, contiguous_runs
+from orbitcal.diagnose.design import DesignBlock, _tau_days, _varies
 
 __all__ = [
     "THERMAL_LAG_REFERENCE_S",
@@ -55,11 +50,6 @@ __all__ = [
 TORQUER_LAG_REFERENCE_S = 10.0
 #: Time constant of the reference lag of the temperature's lag columns [s].
 THERMAL_LAG_REFERENCE_S = 300.0
-
-
-def _tau_days(data: DiagnosisData, train: BoolArray) -> FloatArray:
-    """Time from the training span's mean [day]."""
-    return np.asarray((data.t_utc_s - float(np.mean(data.t_utc_s[train]))) / SECONDS_PER_DAY)
 
 
 def external_asymmetry(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
@@ -85,9 +75,10 @@ def external_asymmetry(data: DiagnosisData, train: BoolArray) -> DesignBlock | N
 
 
 def temperature_lag(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
-    """Per axis, the temperature's rate of change and its square about the training mean."""
+    """Per axis, the temperature (about the training mean) through the reference lag less
+    itself, and its square."""
     temp = data.hk("temperature")
-    if temp is None or not np.all(np.isfinite(temp)) or float(np.std(temp)) <= 0.0:
+    if temp is None or not _varies(temp):
         return None
     dtemp = temp - float(np.mean(temp[train]))
     lag = _lagged(data.t_utc_s, dtemp, THERMAL_LAG_REFERENCE_S) - dtemp
@@ -118,7 +109,7 @@ def _lagged(t_s: FloatArray, u: FloatArray, tau_s: float) -> FloatArray:
 def torquer_lag(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
     """The commanded dipoles through the reference lag, less the commands, coupled 3 x 3."""
     cols = [data.hk(f"mtq_{a}") for a in "xyz"]
-    if all(c is None or float(np.std(c)) <= 0.0 for c in cols):
+    if all(c is None or not _varies(c) for c in cols):
         return None
     kinds = [
         _lagged(data.t_utc_s, c, TORQUER_LAG_REFERENCE_S) - c if c is not None else np.zeros(data.n)
@@ -140,21 +131,21 @@ def clock_drift(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
     )
 
 
-def _products(b_nt: FloatArray, index: Index) -> FloatArray:
-    """``b_x b_y, b_y b_z, b_x b_z`` (over FIELD_SCALE_NT squared) of the samples ``index``."""
-    b = b_nt[index] / FIELD_SCALE_NT
-    return np.stack([b[:, 0] * b[:, 1], b[:, 1] * b[:, 2], b[:, 0] * b[:, 2]], axis=1)
+#: The field components multiplied by each cross-axis term (``b_x b_y, b_y b_z, b_x b_z``).
+_PAIRS = ((0, 1), (1, 2), (0, 2))
 
 
-def _product(b_nt: FloatArray, k: int, index: Index) -> FloatArray:
-    return _products(b_nt, index)[:, k]
+def _product(b_nt: FloatArray, i: int, j: int, index: Index) -> FloatArray:
+    """``b_i b_j / FIELD_SCALE_NT**2`` of the samples ``index``."""
+    b = b_nt[index]
+    return np.asarray(b[:, i] * b[:, j] / FIELD_SCALE_NT**2)
 
 
 def cross_nonlinearity(data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
     """Per axis, the three cross products of the field's components."""
     b = data.b_ref_body_nt
     return DesignBlock(
-        PerAxisColumns(data.n, [partial(_product, b, k) for k in range(3)], axis_major=True),
+        PerAxisColumns(data.n, [partial(_product, b, i, j) for i, j in _PAIRS], axis_major=True),
         [f"cross_{pair}_{a}_nt" for a in "xyz" for pair in ("xy", "yz", "xz")],
         variant="imperfect",
     )
