@@ -321,6 +321,21 @@ def _probability_line(report: Mapping[str, Any], verdict: str) -> str:
     return text + "."
 
 
+def _shrink_words(confirmation: Mapping[str, Any]) -> str:
+    """``; shrink S (90 % interval A-B ...)`` when the confirmation carries its interval."""
+    shrink = _num(confirmation.get("shrink"))
+    interval = confirmation.get("shrink_interval_90")
+    if shrink is None or not isinstance(interval, list) or len(interval) != 2:
+        return ""
+    lo, hi = (_num(v) for v in interval)
+    if lo is None or hi is None:
+        return ""
+    return (
+        f"; shrink {format_number(shrink, 3)}× (90 % interval {format_number(lo, 3)}–"
+        f"{format_number(hi, 3)}, a bootstrap over orbit-long blocks of the final block)"
+    )
+
+
 def _rms_line(report: Mapping[str, Any], verdict: str) -> str:
     confirmation = report.get("confirmation")
     if isinstance(confirmation, dict) and _num(confirmation.get("holdout_rms_before_nt")):
@@ -330,6 +345,7 @@ def _rms_line(report: Mapping[str, Any], verdict: str) -> str:
             f"{format_number(confirmation.get('holdout_rms_before_nt'))} → "
             f"{format_number(confirmation.get('holdout_rms_after_nt'))} nT"
             + (f" (p = {format_number(p, 2)})" if p is not None else "")
+            + _shrink_words(confirmation)
             + "."
         )
     base = report.get("baseline") or {}

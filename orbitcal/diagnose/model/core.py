@@ -26,7 +26,7 @@ from orbitcal.diagnose.data import DiagnosisData
 from orbitcal.diagnose.design import DesignBlock
 from orbitcal.diagnose.effects import CATALOGUE, Effect
 from orbitcal.diagnose.model.confirm import Confirmation, confirm
-from orbitcal.diagnose.model.crossval import CrossValidation, cross_validated
+from orbitcal.diagnose.model.crossval import CrossValidation, cross_validated, orbital_period_s
 from orbitcal.diagnose.model.evidence import (
     Augmented,
     Posterior,
@@ -456,7 +456,7 @@ def model_diagnosis(
     return ModelDiagnosis(
         posterior=post,
         chosen=chosen,
-        confirmation=confirm(e_base, e_model, test_noise, h_starts),
+        confirmation=confirm(e_base, e_model, test_noise, h_starts, _orbit_samples(data, h_index)),
         effect_confirmations=each,
         noise=fit.noise,
         absorbed=_absorbed(project(fit.gram), fit.best),
@@ -465,6 +465,15 @@ def model_diagnosis(
         noise_weights=tuple(float(w) for w in weights),
         crossval=crossval,
     )
+
+
+def _orbit_samples(data: DiagnosisData, index: IntArray) -> int:
+    """Samples of one orbit at the cadence of the samples ``index`` (the shrink's bootstrap
+    blocks, :func:`~orbitcal.diagnose.model.confirm.shrink_interval`)."""
+    if index.size < 2:
+        return 0
+    step_s = float(np.median(np.diff(data.t_utc_s[index])))
+    return int(np.ceil(orbital_period_s(data) / step_s)) if step_s > 0.0 else 0
 
 
 def _params(
