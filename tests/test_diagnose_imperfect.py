@@ -74,6 +74,9 @@ def test_lag_is_the_first_order_response_of_a_held_input() -> None:
     t2 = np.r_[t, t[-1] + 1000.0 + t]
     y2 = _lagged(t2, np.r_[u, u + 7.0], tau)
     assert y2[t.size] == 7.0
+    # at rest at its first value: a run that starts (and stays) at 7 is 7 throughout (the
+    # lfilter form of 2026-11-28 gave 7 (1 - a + a^2) at the run's second sample)
+    np.testing.assert_allclose(y2[t.size : t.size + 25], 7.0, rtol=0, atol=1e-12)
 
 
 def test_sm_axes_are_orthonormal_and_across_the_dipole() -> None:

@@ -24,7 +24,6 @@ and stay.
 from __future__ import annotations
 
 import numpy as np
-from scipy.ndimage import median_filter
 
 from orbitcal.arrays import BoolArray, FloatArray
 from orbitcal.diagnose.data import contiguous_runs
@@ -70,7 +69,14 @@ def _running_median(seg: FloatArray) -> FloatArray:
     """Median of the five samples around each sample of one contiguous run (mirrored at its
     ends, three samples on a run of three or four), (m, 3)."""
     size = min(_WINDOW, seg.shape[0] - (1 - seg.shape[0] % 2))
-    return np.asarray(median_filter(seg, size=(size, 1), mode="mirror"))
+    if size <= 1:
+        return np.array(seg, dtype=float)
+    half = size // 2
+    # numpy's "reflect" is scipy.ndimage's "mirror" (the end sample not repeated); numpy's own
+    # windows keep ``scipy.ndimage`` (~0.35 s to import) out of every diagnosis's start
+    padded = np.pad(np.asarray(seg, dtype=float), ((half, half), (0, 0)), mode="reflect")
+    windows = np.lib.stride_tricks.sliding_window_view(padded, size, axis=0)
+    return np.asarray(np.median(windows, axis=-1))
 
 
 def isolated_samples(residual_nt: FloatArray, t_s: FloatArray, sigma_nt: float) -> BoolArray:
