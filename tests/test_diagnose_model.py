@@ -395,3 +395,38 @@ def test_the_status_says_why_nothing_is_named() -> None:
     status = model_status(md, opts)
     assert status.startswith("none named alone: the chosen model")
     assert "cannot tell which of a, b carries the gain" in status
+
+
+def test_the_verdict_is_the_named_effect_that_explains_most_of_the_final_block() -> None:
+    """CONTRACT section 5: the verdict is the effect that explains most of the gap, and the
+    effects are ranked most explanatory first. b (probability 0.90) takes the final block from
+    10 to 5 nT beside a; a (0.99) from 10 to 9 nT beside b: b is the verdict, ranked first."""
+    from orbitcal.diagnose.model.report_keys import with_model_keys
+
+    effects = ("a", "b", "c")
+    post = Posterior(
+        effects,
+        [(), (0,), (0, 1)],
+        np.array([0.01, 0.09, 0.9]),
+        np.zeros(3),
+        [np.zeros(12)] * 3,
+    )
+    good = _confirmation(1e-6, 10.0, 5.0)
+    md = ModelDiagnosis(
+        posterior=post,
+        chosen=("a", "b"),
+        confirmation=good,
+        noise=(),
+        effect_confirmations={
+            "a": _confirmation(1e-6, 6.0, 5.0),
+            "b": _confirmation(1e-6, 10.0, 5.0),
+        },
+    )
+    opts = ModelOptions(engine="model")
+    assert md.inclusion()["a"] > md.inclusion()["b"]
+    assert model_named(md, opts) == ("b", "a")
+    doc = {"verdict": "none", "effects": [{"name": e} for e in ("c", "a", "b")]}
+    out = with_model_keys(doc, md, opts)
+    assert out["verdict"] == "b"
+    assert [e["name"] for e in out["effects"]] == ["b", "a", "c"]
+    assert out["verdict_probability"] == pytest.approx(0.9)

@@ -56,12 +56,13 @@ def model_named(md: ModelDiagnosis, options: ModelOptions) -> tuple[str, ...]:
 
 
 def _verdict_key(md: ModelDiagnosis, probability: float, effect: str) -> tuple[float, float]:
-    """Named effects in order: the surer first (probability to the report's two decimals), and
-    among equally sure ones the one whose own test shrank the final block most beside the
-    others (three effects at probability 1.00 were otherwise in the order of the catalogue)."""
+    """Named effects in order, the verdict first: the contract's "the effect that explains most
+    of the gap", the one whose removal from the chosen model (both fitted on the training span)
+    costs the final block most RMS; the surer first among equal ones. Until 2026-11-29 the order
+    was the probability's (to two decimals), the final block's RMS only breaking ties."""
     conf = md.effect_confirmations.get(effect)
     shrink = conf.holdout_rms_before_nt - conf.holdout_rms_after_nt if conf else 0.0
-    return (-round(probability, 2), -shrink)
+    return (-shrink, -probability)
 
 
 def unconfirmed(md: ModelDiagnosis, options: ModelOptions) -> tuple[str, ...]:
@@ -194,7 +195,10 @@ def with_model_keys(
             entry["significant"] = entry["name"] in named
             if entry.get("status") != "implausible":
                 entry["status"] = "selected" if entry["significant"] else "not significant"
-        document["effects"].sort(key=lambda e: -e["probability"])
+        # ranked, most explanatory first (CONTRACT section 5): the named effects in the
+        # verdict's order, then the rest by probability
+        rank = {e: k for k, e in enumerate(named)}
+        document["effects"].sort(key=lambda e: (rank.get(e["name"], len(rank)), -e["probability"]))
         document.setdefault("final", {})["effects"] = list(named)
         document["verdict_status"] = model_status(md, options)
     document["verdict_probability"] = _p(md.probability(document["verdict"]))
