@@ -3,6 +3,7 @@ processes on the same telemetry, in turn (diagnose, linear, diagnose, ...), and 
 
 Run:  python benchmarks/diagnose_timing.py DAY_DIR [--week WEEK_DIR] [--build] [--effect NAME]
       [--repeats 2] [--against SRC] [--out PATH]
+      python benchmarks/diagnose_timing.py --readme    # the README's cost figure from the page
 
 ``DAY_DIR`` (and ``WEEK_DIR``) hold telemetry.csv and spacecraft.tle from ``orbitcal simulate``;
 with ``--build`` a missing one is simulated first: one day (or seven) at 1 Hz from 2022-08-02 on
@@ -38,6 +39,10 @@ from pathlib import Path
 import numpy as np
 
 RESULTS = Path(__file__).resolve().parent / "results" / "diagnose_timing.md"
+README = Path(__file__).resolve().parents[1] / "README.md"
+#: The README's diagnosis-cost figure lies between these markers (:func:`readme_figure`).
+README_BEGIN = "<!-- diagnose_cost -->"
+README_END = "<!-- /diagnose_cost -->"
 TLE = Path(__file__).resolve().parents[1] / "orbitcal" / "data" / "swarm_iss_real_tles.tle"
 
 
@@ -68,20 +73,63 @@ def _build(world: Path, days: int, effect: str) -> None:
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
 
 
+def readme_figure(page: str) -> str:
+    """The README's cost figure from the timing page's newest section (its first heading): the
+    median diagnose / linear ratios, and against another revision when that section has them.
+    The figure is never typed (``--readme`` writes it; a test holds the README to it)."""
+    lines = page.splitlines()
+    start = next(i for i, ln in enumerate(lines) if ln.startswith("## "))
+    end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")), len(lines))
+    section = lines[start:end]
+    when = section[0].removeprefix("## ").split(":", 1)[0]
+    linear = next(ln for ln in section if ln.startswith("Median ratio: wall "))
+    wall, cpu = (x.strip().rstrip(".×") for x in linear.removeprefix("Median ratio: ").split(","))
+    text = (
+        f"{wall.removeprefix('wall ')}× `calibrate --method linear` wall "
+        f"({cpu.removeprefix('cpu ')}× CPU) on the torquer day, in the timing page's newest "
+        f"run ({when})"
+    )
+    other = next((ln for ln in section if ln.startswith("Median ratio this / that: ")), None)
+    if other is not None:
+        w, c = (x.strip().rstrip(".") for x in other.split(": ", 1)[1].split(","))
+        text += (
+            f"; {w.removeprefix('wall ')}× the wall ({c.removeprefix('cpu ')}× the CPU) of the "
+            "revision that section names, in the same run"
+        )
+    return text
+
+
+def update_readme(figure: str, readme: Path = README) -> None:
+    """Rewrite the text between the README's ``diagnose_cost`` markers."""
+    text = readme.read_text()
+    start, end = text.index(README_BEGIN) + len(README_BEGIN), text.index(README_END)
+    readme.write_text(text[:start] + figure + text[end:])
+
+
 def _load() -> str:
     return " ".join(f"{x:.2f}" for x in os.getloadavg())
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("world", type=Path)
+    ap.add_argument("world", type=Path, nargs="?")
     ap.add_argument("--week", type=Path, default=None)
     ap.add_argument("--build", action="store_true")
     ap.add_argument("--effect", default="temperature", help="effect of a day --build makes")
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--against", type=Path, default=None, metavar="SRC")
     ap.add_argument("--out", type=Path, default=RESULTS)
+    ap.add_argument(
+        "--readme",
+        action="store_true",
+        help="only rewrite the README's cost figure from the page (--out) and exit",
+    )
     args = ap.parse_args()
+    if args.readme:
+        update_readme(readme_figure(args.out.read_text()))
+        return
+    if args.world is None:
+        ap.error("a world directory is required (DAY_DIR), unless --readme")
     for world, days in ((args.world, 1), (args.week, 7)):
         if world is not None and args.build and not (world / "telemetry.csv").exists():
             _build(world, days, args.effect)
