@@ -105,9 +105,9 @@ def _lagged(t_s: FloatArray, u: FloatArray, tau_s: float) -> FloatArray:
 
 def _first_order(x: FloatArray, a: float) -> FloatArray:
     """``y[0] = x[0]``, ``y[k] = a y[k-1] + (1 - a) x[k-1]``: the exact response of a lag to an
-    input held between samples, at rest at the first value. A loop over floats: ~30 ms at
-    86,400 samples, where importing ``scipy.signal`` for its ``lfilter`` took ~1.3 s of every
-    diagnosis's start."""
+    input held between samples, at rest at the first value. A loop over floats (~50 ms at
+    86,400 samples) in place of ``scipy.signal.lfilter``; the whole diagnosis was no faster for
+    it (``benchmarks/results/diagnose_timing.md``), the rest of scipy being imported anyway."""
     b = 1.0 - a
     y = float(x[0])
     ys = [y]

@@ -73,7 +73,8 @@ def _running_median(seg: FloatArray) -> FloatArray:
         return np.array(seg, dtype=float)
     half = size // 2
     # numpy's "reflect" is scipy.ndimage's "mirror" (the end sample not repeated); numpy's own
-    # windows keep ``scipy.ndimage`` (~0.35 s to import) out of every diagnosis's start
+    # windows stand in for ``median_filter`` (the whole run was no faster for it, see
+    # benchmarks/results/diagnose_timing.md)
     padded = np.pad(np.asarray(seg, dtype=float), ((half, half), (0, 0)), mode="reflect")
     windows = np.lib.stride_tricks.sliding_window_view(padded, size, axis=0)
     return np.asarray(np.median(windows, axis=-1))
