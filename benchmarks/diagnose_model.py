@@ -172,6 +172,7 @@ def sizes(bases: list[Base], n_nulls: int, rng: np.random.Generator) -> dict[str
     out = {}
     for kind in NOISE_KINDS:
         rejected = confirmed = alarms = 0
+        event_tests = event_rejected = event_confirmed = 0
         for w in range(n_nulls):
             base = bases[w % len(bases)]
             b_raw = noise_nt(kind, base.data.b_raw_nt, rng)
@@ -182,10 +183,17 @@ def sizes(bases: list[Base], n_nulls: int, rng: np.random.Generator) -> dict[str
             forced = _run(base, b_raw, confirm_model=(top,))
             rejected += forced.confirmation.rejects(LEVEL)
             confirmed += forced.confirmation.passes(LEVEL)
+            for conf in forced.event_confirmations.values():
+                event_tests += 1
+                event_rejected += conf.rejects(LEVEL)
+                event_confirmed += conf.passes(LEVEL)
         out[kind] = {
             "size": confirmed / n_nulls,
             "size_test": rejected / n_nulls,
             "false_alarms": alarms / n_nulls,
+            "event_tests": event_tests,
+            "event_size": event_confirmed / max(event_tests, 1),
+            "event_size_test": event_rejected / max(event_tests, 1),
         }
     return out
 
@@ -317,6 +325,18 @@ def _write(
         *(
             f"| {k} | {v['size']:.3f} | {v['size'] / LEVEL:.2f} | {v['size_test']:.3f} |"
             f" {v['false_alarms']:.3f} |"
+            for k, v in size.items()
+        ),
+        "",
+        "The within-event test of the effects with an event design (the auroral currents, "
+        "`orbitcal/diagnose/model/within_event.py`) on the same null worlds, made whatever "
+        "their probability: its size as above (rejects and closer) and the test alone.",
+        "",
+        "| noise kind | tests | size | size / level | the test alone |",
+        "|---|---:|---:|---:|---:|",
+        *(
+            f"| {k} | {v['event_tests']} | {v['event_size']:.3f} |"
+            f" {v['event_size'] / LEVEL:.2f} | {v['event_size_test']:.3f} |"
             for k, v in size.items()
         ),
         "",

@@ -157,6 +157,10 @@ def _check_how_sure(report: dict[str, Any], s: _Screen) -> None:
         assert not percents, lines  # a resampling frequency is no probability
     joined = " ".join(lines)
     confirmation = report.get("confirmation")
+    model = report.get("model") or {}
+    by_events = (model.get("event_confirmations") or {}).get(report["verdict"])
+    if by_events and report["verdict"] in model.get("named", []):
+        confirmation = by_events  # an effect named within the final block's events
     if isinstance(confirmation, dict):
         before, after = confirmation["holdout_rms_before_nt"], confirmation["holdout_rms_after_nt"]
         assert f"{format_number(before)} → {format_number(after)} nT" in joined
@@ -218,6 +222,37 @@ def test_a_probability_and_a_confirmation_are_what_how_sure_states(
     assert s.lines[0] == "Probability 97 % that time_offset is present."
     assert s.lines[1] == (
         "On a final block no selection used: held-out RMS 15.2 → 2.11 nT (p = 1.2e−06)."
+    )
+
+
+def test_an_effect_named_within_the_final_blocks_events_states_their_numbers(
+    report: dict[str, Any],
+) -> None:
+    """An effect the model core names by its events (auroral currents, whose amplitudes change
+    from crossing to crossing): how sure states the within-event confirmation's RMS, not the
+    forecast confirmation's."""
+    new = copy.deepcopy(report)
+    new["verdict_probability"] = 1.0
+    new["confirmation"] = {
+        "holdout_rms_before_nt": 30.0,
+        "holdout_rms_after_nt": 30.0,
+        "p_value": 1.0,
+    }
+    new["model"] = {
+        "named": ["time_offset"],
+        "chosen": [],
+        "event_confirmations": {
+            "time_offset": {
+                "holdout_rms_before_nt": 30.02,
+                "holdout_rms_after_nt": 9.234,
+                "p_value": 0.043,
+            }
+        },
+    }
+    s = check_first_screen(new)
+    assert s.lines[1] == (
+        "Within the final block's events, each fitted on part of itself: RMS 30.0 → 9.23 nT "
+        "(p = 0.043)."
     )
 
 

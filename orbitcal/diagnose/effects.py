@@ -61,6 +61,7 @@ from orbitcal.diagnose.design import (
     _design_temperature,
     _design_time_offset,
 )
+from orbitcal.diagnose.event_design import FAC_EVENTS, EventDesign
 
 __all__ = [
     "CATALOGUE",
@@ -138,6 +139,11 @@ class Effect:
         Parameters whose range widens with the element set's age at the data (the orbit
         error's), by prefix: the power of the age they widen with beyond two days, and the
         least half-width per day of age (:func:`orbitcal.diagnose.bounds.aged_range`).
+    event_design : EventDesign, optional
+        For an effect whose amplitudes change from event to event (auroral crossings), its
+        events' own columns (:mod:`orbitcal.diagnose.event_design`): no fit on the training span
+        forecasts it, so the model core confirms its form within each event of the final block
+        instead (:mod:`orbitcal.diagnose.model.within_event`).
     imperfect : callable, optional
         ``imperfect(data, train) -> DesignBlock | None``: columns of what the effect's own
         forms leave out when it is real but not exactly as written (the external field's
@@ -161,6 +167,7 @@ class Effect:
     consistency: Callable[[list[str], list[float], list[float]], list[str]] | None = None
     age_growth: tuple[tuple[str, int, float], ...] = ()
     imperfect: DesignFn | None = None
+    event_design: EventDesign | None = None
 
     @property
     def rescanned_beside_others(self) -> bool:
@@ -305,6 +312,7 @@ FAC_REGIONAL_TEST = RegionalTest(
 _SENSITIVITY_THERMAL = "sensitivity thermal coefficient <= 500 ppm/degC (x 5e4 nT)"
 _SOLAR_ARRAY = "stray field of solar-array currents, <= 500 nT"
 _NONLINEARITY = "nonlinearity <= 1 % of 5e4 nT"
+_FAC_PERTURBATION = "field-aligned-current perturbation at LEO <= 3000 nT"
 
 #: The catalogue, each effect with the ranges of its parameters (``docs/diagnosis_priors.md``).
 CATALOGUE: tuple[Effect, ...] = (
@@ -579,8 +587,11 @@ CATALOGUE: tuple[Effect, ...] = (
         _design_fac,
         regional_test=FAC_REGIONAL_TEST,
         param_ranges=(
-            ("east_", symmetric(3000.0, "field-aligned-current perturbation at LEO <= 3000 nT")),
+            ("east_", symmetric(3000.0, _FAC_PERTURBATION)),
+            # the within-event columns' second direction across B (event_design)
+            ("across_", symmetric(3000.0, _FAC_PERTURBATION)),
         ),
+        event_design=FAC_EVENTS,
     ),
     Effect(
         "attitude_error",

@@ -337,6 +337,18 @@ def _shrink_words(confirmation: Mapping[str, Any]) -> str:
 
 
 def _rms_line(report: Mapping[str, Any], verdict: str) -> str:
+    model = report.get("model") or {}
+    by_events = (model.get("event_confirmations") or {}).get(verdict)
+    if isinstance(by_events, dict) and verdict in (model.get("named") or []):
+        p = _num(by_events.get("p_value"))
+        # amplitudes that change from event to event: no fit on other data forecasts them
+        return (
+            "Within the final block's events, each fitted on part of itself: RMS "
+            f"{format_number(by_events.get('holdout_rms_before_nt'))} → "
+            f"{format_number(by_events.get('holdout_rms_after_nt'))} nT"
+            + (f" (p = {format_number(p, 2)})" if p is not None else "")
+            + "."
+        )
     confirmation = report.get("confirmation")
     if isinstance(confirmation, dict) and _num(confirmation.get("holdout_rms_before_nt")):
         p = _num(confirmation.get("p_value"))

@@ -9,18 +9,19 @@ from typing import Any
 
 import numpy as np
 
-from orbitcal.arrays import FloatArray, IntArray
+from orbitcal.arrays import FloatArray
 from orbitcal.diagnose.attribution.scores import EffectScore
 from orbitcal.diagnose.design import AURORAL_MLAT_DEG, QUIET_MLAT_DEG
 from orbitcal.diagnose.effects import (
     DiagnosisData,
 )
+from orbitcal.diagnose.event_design import FAC_CHUNK_S, FAC_FOLDS, fac_legs
 from orbitcal.diagnose.noise import despiked
 from orbitcal.metrics import norm_rms_nt
 
 #: Chunk length [s] and folds of the regional test's cross-validation within auroral crossings.
-FAC_CV_CHUNK_S = 20.0
-FAC_CV_FOLDS = 5
+FAC_CV_CHUNK_S = FAC_CHUNK_S
+FAC_CV_FOLDS = FAC_FOLDS
 #: Ridge of the regional test's per-leg fits, relative to the mean diagonal of their normal
 #: matrix: a bump the fitting folds hardly reach stays bounded. On the real Swarm storm pass
 #: (two legs, 137 and 549 s at 1 Hz) the unregularised fit predicted the held-out folds with
@@ -113,20 +114,3 @@ def regional_fac(
     return EffectScore(
         "field_aligned_currents", significant, rms_hi, rms_after, float("nan"), params
     )
-
-
-def fac_legs(t_s: FloatArray, amlat_deg: FloatArray, idx: IntArray) -> list[IntArray]:
-    """The legs of the auroral crossings of the samples ``idx``: runs of consecutive samples
-    (gaps under a minute) split at their highest magnetic latitude, each leg at least 3 samples
-    (a shorter one joins the other leg of its run)."""
-    if idx.size == 0:
-        return []
-    breaks = np.flatnonzero((np.diff(idx) > 1) | (np.diff(t_s[idx]) > 60.0)) + 1
-    legs: list[IntArray] = []
-    for run in np.split(idx, breaks):
-        apex = int(np.argmax(amlat_deg[run]))
-        parts = [run[: apex + 1], run[apex + 1 :]]
-        if min(p.size for p in parts) < 3:
-            parts = [run]
-        legs.extend(p for p in parts if p.size)
-    return legs

@@ -47,6 +47,7 @@ from orbitcal.diagnose.model.gram import (
     whitened_grams,
 )
 from orbitcal.diagnose.model.noise_model import AxisNoise, fit_noise, noise_skip, run_starts
+from orbitcal.diagnose.model.within_event import judged_by_events
 from orbitcal.diagnose.options import ModelOptions
 
 __all__ = ["ModelDiagnosis", "candidate_forms", "model_diagnosis", "run_starts"]
@@ -88,6 +89,17 @@ class ModelDiagnosis:
         With two or more chosen effects, per chosen effect the chosen model against the chosen
         model without it (both fitted on the training span) on the same final block: whether
         that effect, beside the others, forecasts the block better.
+    beside : tuple of str
+        Effects of the posterior's choice whose amplitudes change from event to event (an
+        :attr:`~orbitcal.diagnose.effects.Effect.event_design`): fitted on the training span
+        with the chosen model, never part of its forecast (they forecast no new event).
+    event_probability : dict of str to float
+        Per effect with an event design and events in the training span, its probability from
+        its events' own amplitudes there (:mod:`orbitcal.diagnose.model.within_event`): its
+        ``probability``, in place of the posterior's (of one set of amplitudes for every event).
+    event_confirmations : dict of str to Confirmation
+        Per such effect of probability at least the cut-off and with events in the final block,
+        its within-event confirmation there, on what the forecast confirmation leaves.
     """
 
     posterior: Posterior
@@ -100,16 +112,27 @@ class ModelDiagnosis:
     noise_weights: tuple[float, ...] = ()
     crossval: CrossValidation = field(default_factory=lambda: CrossValidation(0))
     effect_confirmations: dict[str, Confirmation] = field(default_factory=dict)
+    beside: tuple[str, ...] = ()
+    event_probability: dict[str, float] = field(default_factory=dict)
+    event_confirmations: dict[str, Confirmation] = field(default_factory=dict)
 
     def inclusion(self) -> dict[str, float]:
-        """Posterior inclusion probability per candidate."""
-        return self.posterior.inclusion()
+        """Posterior inclusion probability per candidate (an effect with an event design: from
+        its events, :attr:`event_probability`)."""
+        return {**self.posterior.inclusion(), **self.event_probability}
 
     def probability(self, effect: str) -> float:
         """Posterior probability that ``effect`` is present (0 for a candidate without witness
-        in the data, and for ``"none"`` the probability that no effect is)."""
+        in the data, and for ``"none"`` the probability that no effect is: no other effect, by
+        the posterior, and none of those judged by their events, taken as independent)."""
         if effect == "none":
-            return self.posterior.none()
+            events = self.event_probability
+            post = self.posterior
+            apart = {post.effects.index(e) for e in events if e in post.effects}
+            p = sum(pr for m, pr in zip(post.models, post.prob, strict=True) if set(m) <= apart)
+            for q in events.values():
+                p *= 1.0 - q
+            return float(p)
         return self.inclusion().get(effect, 0.0)
 
 
@@ -358,21 +381,29 @@ def _under(
     return _Fitted(noise, gram, best, post)
 
 
-def model_diagnosis(
+@dataclass(frozen=True)
+class _Stage:
+    """The selection's products on the training span (:func:`_selection_stage`)."""
+
+    forms: list[Form]
+    index: IntArray
+    step: int
+    starts: IntArray
+    skip: int
+    cal_mean: FloatArray
+    fits: list[_Fitted]
+    post: Posterior
+    weights: FloatArray
+    fit: _Fitted
+
+
+def _selection_stage(
     data: DiagnosisData,
     train: BoolArray,
-    holdout: BoolArray,
-    options: ModelOptions = ModelOptions(),
-    forms: Sequence[Form] | None = None,
-    confirm_model: Sequence[str] | None = None,
-) -> ModelDiagnosis:
-    """The model core on ``data``: selection on ``train`` only, one confirmation on ``holdout``.
-
-    ``forms`` (from :func:`candidate_forms` on the same data and training span) may be given
-    to reuse the design between calls on the same world. ``confirm_model`` (candidates' names,
-    at most ``max_effects``) confirms that model instead of the chosen one: for measuring the
-    confirmation's size on null worlds (``benchmarks/diagnose_model.py``).
-    """
+    options: ModelOptions,
+    forms: Sequence[Form] | None,
+) -> _Stage:
+    """Forms, noise models and the posterior over models, from the training span only."""
     forms = list(candidate_forms(data, train, options) if forms is None else forms)
     index = estimation_samples(train)
     step = int(np.median(np.diff(index))) if index.size > 1 else 1
@@ -397,35 +428,80 @@ def model_diagnosis(
     ]
     post, weights = averaged([f.post for f in fits])
     fit = fits[int(np.argmax(weights))]
-    by_effect = {f.effect: f for f in fit.best}
-    chosen = post.median_model(options.selection_probability)
-    crossval = CrossValidation(0, kept=chosen)
+    return _Stage(forms, index, step, starts, skip, cal_mean, fits, post, weights, fit)
+
+
+def _chosen(
+    data: DiagnosisData,
+    train: BoolArray,
+    st: _Stage,
+    by_effect: dict[str, Form],
+    options: ModelOptions,
+    confirm_model: Sequence[str] | None,
+) -> tuple[tuple[str, ...], tuple[str, ...], CrossValidation]:
+    """The posterior's choice kept by the cross-validation, the effects fitted beside it, and
+    the cross-validation. Effects whose amplitudes change from event to event are fitted with
+    the chosen model but never forecast (nor cross-validated across orbits): their own test is
+    within the events of the final block (:mod:`~orbitcal.diagnose.model.within_event`)."""
+    chosen = st.post.median_model(options.selection_probability)
+    event_local = {e.name for e in CATALOGUE if e.event_design is not None}
+    beside = tuple(e for e in chosen if e in event_local)
+    chosen = tuple(e for e in chosen if e not in event_local)
     if confirm_model is not None:
-        chosen = tuple(confirm_model)
-    elif chosen:
-        crossval = cross_validated(
-            data,
-            train,
-            _compact([by_effect[e] for e in chosen]),
-            fit.noise,
-            skip=skip,
-            cal_mean=cal_mean,
-            cal_sd=np.full(12, CAL_PRIOR_SD_NT),
-        )
-        chosen = crossval.kept
+        return tuple(confirm_model), (), CrossValidation(0, kept=tuple(confirm_model))
+    if not chosen:
+        return chosen, beside, CrossValidation(0, kept=chosen)
+    crossval = cross_validated(
+        data,
+        train,
+        _compact([by_effect[e] for e in chosen]),
+        st.fit.noise,
+        skip=st.skip,
+        cal_mean=st.cal_mean,
+        cal_sd=np.full(12, CAL_PRIOR_SD_NT),
+    )
+    return crossval.kept, beside, crossval
+
+
+def model_diagnosis(
+    data: DiagnosisData,
+    train: BoolArray,
+    holdout: BoolArray,
+    options: ModelOptions = ModelOptions(),
+    forms: Sequence[Form] | None = None,
+    confirm_model: Sequence[str] | None = None,
+) -> ModelDiagnosis:
+    """The model core on ``data``: selection on ``train`` only, one confirmation on ``holdout``.
+
+    ``forms`` (from :func:`candidate_forms` on the same data and training span) may be given
+    to reuse the design between calls on the same world. ``confirm_model`` (candidates' names,
+    at most ``max_effects``) confirms that model instead of the chosen one, and tests every
+    effect with an event design whatever its probability: for measuring the confirmation's
+    size on null worlds (``benchmarks/diagnose_model.py``).
+    """
+    st = _selection_stage(data, train, options, forms)
+    forms, index, step, starts = st.forms, st.index, st.step, st.starts
+    post, fit, fits = st.post, st.fit, st.fits
+    by_effect = {f.effect: f for f in fit.best}
+    chosen, beside, crossval = _chosen(data, train, st, by_effect, options, confirm_model)
     h_index = np.flatnonzero(holdout)
     h_starts = run_starts(data, h_index, 1)
 
     def fitted(names: Sequence[str]) -> tuple[FloatArray, list[Form], FloatArray]:
-        """The model ``names`` fitted on the training span: its parameters (calibration first),
-        its forms, and its effect parameters placed in the Gram's columns."""
+        """The model ``names`` (with ``beside``) fitted on the training span: its parameters
+        (calibration first), its forms, and its effect parameters placed in the Gram's
+        columns."""
+        names = (*names, *beside) if names else ()
         params = post.thetas[post.models.index(tuple(sorted(post.effects.index(e) for e in names)))]
         model_forms = [by_effect[e] for e in sorted(names, key=post.effects.index)]
         return params, model_forms, _theta_full(forms, model_forms, params[12:])
 
     def forecast_error(names: Sequence[str]) -> FloatArray:
-        """The final block's error of the model ``names`` fitted on the training span."""
+        """The final block's error of the model ``names`` fitted on the training span (the
+        effects ``beside`` it not forecast)."""
         params, _, full = fitted(names)
+        for e in beside:
+            full[by_effect[e].cols] = 0.0
         return apply_model(data, h_index, forms, params[:12], full)
 
     e_model = forecast_error(chosen)
@@ -453,16 +529,34 @@ def model_diagnosis(
         if len(chosen) > 1
         else {}
     )
+    orbit = _orbit_samples(data, h_index)
+    confirmation = confirm(e_base, e_model, test_noise, h_starts, orbit)
+    # what the forecast confirmation names leaves; the events' own test is made on it
+    left = e_model if chosen and confirmation.passes(options.confirmation_level) else e_base
+    # the chosen model's training residual with the events' own field left in it
+    for e in beside:
+        chosen_full[by_effect[e].cols] = 0.0
+    events = judged_by_events(
+        data,
+        (index, starts, step, apply_model(data, index, forms, params[:12], chosen_full)),
+        (h_index, h_starts, left, orbit),
+        CATALOGUE,
+        options,
+        force=confirm_model is not None,
+    )
     return ModelDiagnosis(
         posterior=post,
         chosen=chosen,
-        confirmation=confirm(e_base, e_model, test_noise, h_starts, _orbit_samples(data, h_index)),
+        confirmation=confirmation,
         effect_confirmations=each,
+        beside=beside,
+        event_probability=events.probability,
+        event_confirmations=events.confirmations,
         noise=fit.noise,
         absorbed=_absorbed(project(fit.gram), fit.best),
         params=_params(post, fit.best, chosen_forms, params[12:]),
         forms={f.effect: f.block.variant for f in fit.best},
-        noise_weights=tuple(float(w) for w in weights),
+        noise_weights=tuple(float(w) for w in st.weights),
         crossval=crossval,
     )
 

@@ -22,7 +22,7 @@ from scipy.linalg.blas import dsyrk
 from orbitcal.arrays import FloatArray
 from orbitcal.diagnose.data import FIELD_SCALE_NT, DiagnosisData
 from orbitcal.diagnose.design import DesignBlock
-from orbitcal.diagnose.effects import block_ranges
+from orbitcal.diagnose.effects import ParamRange, block_ranges
 from orbitcal.diagnose.model.noise_model import AxisNoise, whiten_with
 
 __all__ = [
@@ -31,6 +31,7 @@ __all__ = [
     "Gram",
     "apply_model",
     "group_prior",
+    "ranges_prior",
     "whitened_gram",
     "whitened_grams",
 ]
@@ -79,8 +80,13 @@ def group_prior(block: DesignBlock, sd_fraction: float) -> tuple[FloatArray, Flo
     range's middle, with a standard deviation of ``sd_fraction`` times the largest distance
     from that centre to a bound (1/3: the range is three standard deviations).
     """
+    return ranges_prior(block_ranges(block), sd_fraction)
+
+
+def ranges_prior(ranges: Sequence[ParamRange], sd_fraction: float) -> tuple[FloatArray, FloatArray]:
+    """The Gaussian prior of parameters of these ranges (:func:`group_prior`)."""
     means, sds = [], []
-    for rng in block_ranges(block):
+    for rng in ranges:
         if rng.prior_sd is not None:
             means.append(float(rng.prior_mean or 0.0))
             sds.append(float(rng.prior_sd))

@@ -18,6 +18,7 @@ from orbitcal.diagnose.model.core import ModelDiagnosis
 from orbitcal.diagnose.options import ModelOptions
 
 __all__ = [
+    "event_named",
     "model_named",
     "model_section",
     "model_status",
@@ -36,8 +37,24 @@ def model_named(md: ModelDiagnosis, options: ModelOptions) -> tuple[str, ...]:
     confirms. The chosen model must forecast the block better than the calibration alone
     (:meth:`Confirmation.passes` at the options' level); with several chosen effects, each must
     also forecast it better beside the others (its own test, Holm's step-down over the chosen
-    effects at the same level). The first is the verdict (:func:`_verdict_key`)."""
-    level = options.confirmation_level
+    effects at the same level). Beside them, an effect confirmed within the final block's events
+    (:func:`event_named`). The first is the verdict (:func:`_verdict_key`)."""
+    named = [*_forecast_named(md, options.confirmation_level), *event_named(md, options)]
+    inc = md.inclusion()
+    return tuple(sorted(named, key=lambda e: _verdict_key(md, inc.get(e, 0.0), e)))
+
+
+def event_named(md: ModelDiagnosis, options: ModelOptions) -> tuple[str, ...]:
+    """The effects whose within-event confirmation on the final block passes at the
+    confirmation level over the number of such tests made (Bonferroni;
+    :mod:`orbitcal.diagnose.model.within_event`)."""
+    tests = md.event_confirmations
+    level = options.confirmation_level / max(len(tests), 1)
+    return tuple(e for e, c in tests.items() if c.passes(level))
+
+
+def _forecast_named(md: ModelDiagnosis, level: float) -> tuple[str, ...]:
+    """The chosen effects the forecast confirmation names (:func:`model_named`)."""
     if not md.chosen or not md.confirmation.passes(level):
         return ()
     if not md.effect_confirmations:
@@ -50,17 +67,19 @@ def model_named(md: ModelDiagnosis, options: ModelOptions) -> tuple[str, ...]:
         rejected.add(name)
     # an effect whose test rejects but whose forecast is not closer is not named, and does not
     # stop the others' step-down (the order is the p-values')
-    named = [e for e in md.chosen if e in rejected and md.effect_confirmations[e].closer()]
-    inc = md.inclusion()
-    return tuple(sorted(named, key=lambda e: _verdict_key(md, inc[e], e)))
+    return tuple(e for e in md.chosen if e in rejected and md.effect_confirmations[e].closer())
 
 
 def _verdict_key(md: ModelDiagnosis, probability: float, effect: str) -> tuple[float, float]:
     """Named effects in order, the verdict first: the contract's "the effect that explains most
     of the gap", the one whose removal from the chosen model (both fitted on the training span)
     costs the final block most RMS; the surer first among equal ones. Until 2026-11-29 the order
-    was the probability's (to two decimals), the final block's RMS only breaking ties."""
-    conf = md.effect_confirmations.get(effect)
+    was the probability's (to two decimals), the final block's RMS only breaking ties. An
+    effect named by its events counts what its within-event prediction takes; the one effect of
+    a chosen model, what the model's forecast takes."""
+    conf = md.effect_confirmations.get(effect) or md.event_confirmations.get(effect)
+    if conf is None and md.chosen == (effect,):
+        conf = md.confirmation
     shrink = conf.holdout_rms_before_nt - conf.holdout_rms_after_nt if conf else 0.0
     return (-shrink, -probability)
 
@@ -81,7 +100,8 @@ def model_status(md: ModelDiagnosis, options: ModelOptions) -> str:
     confirm; which pairs the posterior cannot tell apart; and which candidates the calibration
     mostly reproduces on this span (more than half of their prior field is a change of the 12
     parameters), so that the data cannot separate them from it."""
-    named = model_named(md, options)
+    named = _forecast_named(md, options.confirmation_level)
+    by_events = event_named(md, options)
     inc = md.inclusion()
     conf = md.confirmation
     before, after = conf.holdout_rms_before_nt, conf.holdout_rms_after_nt
@@ -108,11 +128,29 @@ def model_status(md: ModelDiagnosis, options: ModelOptions) -> str:
         )
     elif md.chosen:
         parts.append(
-            f"none: the model chosen on the training span, {listed(md.chosen)}, does not "
-            f"forecast the final block better than the calibration alone ({block})"
+            f"{'' if by_events else 'none: '}the model chosen on the training span, "
+            f"{listed(md.chosen)}, does not forecast the final block better than the "
+            f"calibration alone ({block})"
         )
-    else:
+    elif not by_events:
         parts.append("none")
+    for e in by_events:
+        ev = md.event_confirmations[e]
+        parts.append(
+            f"named by its events: {e}, whose amplitudes change from event to event (no fit on "
+            "the training span forecasts them): each event of the final block fitted on part "
+            f"of it predicts the rest ({ev.holdout_rms_before_nt:.1f} -> "
+            f"{ev.holdout_rms_after_nt:.1f} nT, p {ev.p_value:.2g}); probability "
+            f"{inc.get(e, 0.0):.2f} from the training span's events"
+        )
+    cutoff = options.selection_probability
+    for e, p in md.event_probability.items():
+        if p >= cutoff and e not in by_events:
+            parts.append(
+                f"{e} (probability {p:.2f} from the training span's events) not confirmed "
+                "within the final block's events"
+                + ("" if e in md.event_confirmations else " (the block holds none)")
+            )
     parts.extend(s["statement"] for s in splits(md, options.selection_probability))
     mostly = sorted(
         ((e, a) for e, a in md.absorbed.items() if a > 0.5 and e not in named),
@@ -134,7 +172,9 @@ def splits(md: ModelDiagnosis, cutoff: float) -> list[dict[str, Any]]:
     at least ``cutoff``) while neither alone reaches it."""
     inc = md.inclusion()
     out = []
-    for a, b in itertools.combinations(md.posterior.effects, 2):
+    # effects judged by their events have no joint posterior with the others
+    joint = [e for e in md.posterior.effects if e not in md.event_probability]
+    for a, b in itertools.combinations(joint, 2):
         both = md.posterior.pair(a, b)
         either = inc[a] + inc[b] - both
         if either >= cutoff and max(inc[a], inc[b]) < cutoff:
@@ -164,6 +204,9 @@ def model_section(md: ModelDiagnosis, options: ModelOptions) -> dict[str, Any]:
         "named": list(named),
         "not_confirmed": list(unconfirmed(md, options)),
         "effect_confirmations": {e: c.to_json() for e, c in md.effect_confirmations.items()},
+        "fitted_beside": list(md.beside),
+        "event_probability": {e: _p(p) for e, p in md.event_probability.items()},
+        "event_confirmations": {e: c.to_json() for e, c in md.event_confirmations.items()},
         "splits": splits(md, options.selection_probability),
         "absorbed_by_calibration_fraction": {e: _p(a) for e, a in md.absorbed.items()},
         "forms": dict(md.forms),
