@@ -123,17 +123,22 @@ def frac_filter(d: float) -> FloatArray:
     return np.r_[1.0, np.cumprod((k - 1.0 - d) / k)]
 
 
+def filtered(a: FloatArray, x: FloatArray) -> FloatArray:
+    """``sum_j a_j x[t - j]`` along the first axis, ``x`` taken as zero before its first row."""
+    out = a[0] * np.asarray(x, dtype=float)
+    for j in range(1, a.size):
+        out[j:] += a[j] * x[:-j]
+    return out
+
+
 def whiten_with(
     a: FloatArray, sigma: float, x: FloatArray, run_start: IntArray
 ) -> tuple[FloatArray, np.ndarray]:
     """``sum_j a_j x[t - j] / sigma`` (rows whose history leaves their run are zero and invalid)."""
     x = np.asarray(x, dtype=float)
-    lag = a.size - 1
     t = np.arange(x.shape[0])
-    valid = (t - np.asarray(run_start)) >= lag
-    out = a[0] * x
-    for j in range(1, lag + 1):
-        out[j:] += a[j] * x[:-j]
+    valid = (t - np.asarray(run_start)) >= a.size - 1
+    out = filtered(a, x)
     out[~valid] = 0.0
     out /= sigma
     return out, valid

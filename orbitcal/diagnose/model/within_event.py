@@ -43,9 +43,10 @@ import numpy as np
 from orbitcal.arrays import FloatArray, IntArray
 from orbitcal.diagnose.data import DiagnosisData
 from orbitcal.diagnose.effects import Effect
+from orbitcal.diagnose.event_design import Event
 from orbitcal.diagnose.model.confirm import Confirmation, confirm
 from orbitcal.diagnose.model.gram import ranges_prior
-from orbitcal.diagnose.model.noise_model import AxisNoise, fit_noise, run_starts
+from orbitcal.diagnose.model.noise_model import AxisNoise, filtered, fit_noise, run_starts
 from orbitcal.diagnose.options import ModelOptions
 
 __all__ = [
@@ -55,7 +56,6 @@ __all__ = [
     "event_confirmation",
     "event_evidence",
     "event_prediction",
-    "event_rows",
     "judged_by_events",
 ]
 
@@ -128,16 +128,6 @@ def event_confirmation(
     return confirm(residual_nt, residual_nt - pred, noise, run_start, block_samples)
 
 
-def event_rows(data: DiagnosisData, index: IntArray, effect: Effect) -> np.ndarray:
-    """Which positions of ``index`` lie in one of ``effect``'s events (all False without an event
-    design)."""
-    out = np.zeros(np.asarray(index).size, dtype=bool)
-    if effect.event_design is not None:
-        for ev in effect.event_design.events(data, index):
-            out[ev.rows] = True
-    return out
-
-
 def _run_ends(run_start: IntArray) -> IntArray:
     """Per position, the last position of its run."""
     run_start = np.asarray(run_start)
@@ -201,10 +191,10 @@ def _whitened_clusters(
     effect: Effect,
     noise: Sequence[AxisNoise],
     run_start: IntArray,
+    events: Sequence[Event],
 ) -> list[_Cluster]:
-    """The clusters of ``effect``'s events among the samples ``index`` (see :class:`_Cluster`)."""
-    design = effect.event_design
-    events = design.events(data, index) if design is not None else []
+    """The clusters of ``events`` (``effect``'s among the samples ``index``; see
+    :class:`_Cluster`)."""
     if not events:
         return []
     wy = np.zeros_like(residual_nt, dtype=float)
@@ -242,11 +232,7 @@ def _whitened_clusters(
             col += kk
         raw = x[inside].copy()
         for i, a in enumerate(filters):
-            xi = x[:, i, :].copy()
-            filtered = a[0] * xi
-            for j in range(1, a.size):
-                filtered[j:] += a[j] * xi[:-j]
-            x[:, i, :] = filtered / noise[i].sigma_nt
+            x[:, i, :] = filtered(a, x[:, i, :].copy()) / noise[i].sigma_nt
         rows = valid[lo : hi + 1]
         y = wy[lo : hi + 1][rows].reshape(-1)
         out.append(_Cluster(x[rows].reshape(-1, width), y, raw, names))
@@ -305,6 +291,7 @@ def event_evidence(
     run_start: IntArray,
     prior_sd_fraction: float,
     scales: Sequence[float] = EVENT_SCALES,
+    events: Sequence[Event] | None = None,
 ) -> EventEvidence | None:
     """What ``effect``'s events among the samples ``index`` tell of it, from the residual
     ``residual_nt`` ((m, 3) [nT]) whitened by ``noise`` (runs ``run_start``); None when they
@@ -318,7 +305,9 @@ def event_evidence(
     ``material_nt``: a sheet of a few nT is not the auroral currents) is read from the posterior
     of the amplitudes at the scale of greatest evidence."""
     design = effect.event_design
-    clusters = _whitened_clusters(data, index, residual_nt, effect, noise, run_start)
+    if events is None:
+        events = design.events(data, index) if design is not None else []
+    clusters = _whitened_clusters(data, index, residual_nt, effect, noise, run_start, events)
     if design is None or not clusters:
         return None
     by_scale = [[_posterior(c, effect, prior_sd_fraction, s) for c in clusters] for s in scales]
@@ -366,7 +355,12 @@ def judged_by_events(
     prior = min(max(options.expected_effects / max(len(catalogue), 1), 1e-9), 1.0 - 1e-9)
     out = EventJudgement()
     for eff in catalogue:
-        inside = event_rows(data, index, eff)
+        if eff.event_design is None:
+            continue
+        events = eff.event_design.events(data, index)  # built once, for the mask and evidence
+        inside = np.zeros(index.size, dtype=bool)
+        for ev in events:
+            inside[ev.rows] = True
         quiet = np.flatnonzero(~inside)
         if not inside.any() or quiet.size < MIN_QUIET_SAMPLES:
             continue
@@ -376,7 +370,7 @@ def judged_by_events(
             max_order=options.noise_max_order,
         )
         evidence = event_evidence(
-            data, index, residual, eff, noise, starts, options.prior_sd_fraction
+            data, index, residual, eff, noise, starts, options.prior_sd_fraction, events=events
         )
         if evidence is None:
             continue
