@@ -170,6 +170,25 @@ def test_an_effect_named_by_its_events_ranks_by_what_it_explains() -> None:
     assert model_named(weak, opts) == ("a",)
 
 
+def test_an_effect_named_by_its_events_is_not_called_inseparable_from_the_calibration() -> None:
+    """An effect its events name is not also listed among those the calibration absorbs (the
+    one-set form's share of the calibration says nothing about its events' own amplitudes)."""
+    post = Posterior(("a", "c"), [(), (0,)], np.array([0.9, 0.1]), np.zeros(2), [np.zeros(12)] * 2)
+    md = ModelDiagnosis(
+        posterior=post,
+        chosen=(),
+        confirmation=_conf(1.0, 10.0, 10.0),
+        noise=(),
+        absorbed={"a": 0.8, "c": 0.9},
+        event_probability={"c": 1.0},
+        event_confirmations={"c": _conf(1e-4, 10.0, 5.0)},
+    )
+    opts = ModelOptions(engine="model")
+    status = model_status(md, opts)
+    assert "named by its events: c" in status
+    assert "most of the field of a (80 %)" in status and "c (90 %)" not in status, status
+
+
 @pytest.mark.parametrize("kind", ["ar", "level"])
 def test_event_evidence_equals_the_dense_gaussian_evidence(kind: str) -> None:
     """The clustered evidence (events whose whitened columns overlap taken together) equals

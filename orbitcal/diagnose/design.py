@@ -80,6 +80,10 @@ class DesignBlock:
     element_age_days : float, optional
         The element set's age at the data, which widens the orbit error's ranges
         (:attr:`DiagnosisData.element_age_days`).
+    forms_searched : int
+        How many forms a scan of the training data chose this one among (the attitude error's
+        phase windows); the model core's posterior pays for the choice as for that many forms
+        (:attr:`orbitcal.diagnose.model.gram.Form.n_forms`).
     sensor_matrix : bool
         The regressors already hold the sensor's matrix (estimated with the form: a field of
         thousands of nT, :mod:`orbitcal.diagnose.orbit_shift`); the stated values are not
@@ -98,6 +102,7 @@ class DesignBlock:
     in_range_forms: bool = field(default=False, compare=False)
     element_age_days: float | None = field(default=None, compare=False)
     sensor_matrix: bool = field(default=False, compare=False)
+    forms_searched: int = field(default=1, compare=False)
 
     @property
     def n(self) -> int:

@@ -62,6 +62,7 @@ from orbitcal.diagnose.design import (
     _design_time_offset,
 )
 from orbitcal.diagnose.event_design import FAC_EVENTS, EventDesign
+from orbitcal.diagnose.orbit_phase import design_attitude_by_phase
 
 __all__ = [
     "CATALOGUE",
@@ -151,6 +152,12 @@ class Effect:
         (:mod:`orbitcal.diagnose.model`) under the shrinkage prior of their ``param_ranges``;
         an effect present in a form the catalogue does not write then leaves less for the
         other effects' columns to take.
+    further_forms : callable, optional
+        ``further_forms(data, train) -> DesignBlock | None``: a form of the effect that only the
+        model core weighs, beside :meth:`design`'s (by evidence, its choice paid for as one
+        more form): the attitude error as a step function of the orbital phase
+        (:mod:`orbitcal.diagnose.orbit_phase`), whose 72 columns the rules engine's choice
+        among alternatives by the training BIC was never measured with.
     """
 
     name: str
@@ -168,6 +175,7 @@ class Effect:
     age_growth: tuple[tuple[str, int, float], ...] = ()
     imperfect: DesignFn | None = None
     event_design: EventDesign | None = None
+    further_forms: DesignFn | None = None
 
     @property
     def rescanned_beside_others(self) -> bool:
@@ -191,6 +199,12 @@ class Effect:
         if key not in held:
             held[key] = _owned(self.build(data, train), self.name)
         return held[key]
+
+    def further_design(self, data: DiagnosisData, train: BoolArray) -> DesignBlock | None:
+        """The form of :attr:`further_forms` on ``data``, marked as its own (None without)."""
+        if self.further_forms is None:
+            return None
+        return _owned(self.further_forms(data, train), self.name)
 
     def design_beside(
         self, data: DiagnosisData, train: BoolArray, fixed: Sequence[DesignBlock]
@@ -602,7 +616,12 @@ CATALOGUE: tuple[Effect, ...] = (
         design_attitude,
         absorbed_by_calibration=True,
         build_beside=lambda data, train, fixed: design_attitude(data, train, fixed=fixed),
-        param_ranges=(("dtheta_", symmetric(100.0, "attitude error <= 100 mrad (~6 deg)")),),
+        param_ranges=(
+            # a star-tracker head's misalignment from the others after calibration on ground
+            ("dtheta_phase_", symmetric(3.0, "star-tracker head misalignment <= 3 mrad")),
+            ("dtheta_", symmetric(100.0, "attitude error <= 100 mrad (~6 deg)")),
+        ),
+        further_forms=design_attitude_by_phase,
     ),
 )
 

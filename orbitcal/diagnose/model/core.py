@@ -179,18 +179,21 @@ def candidate_forms(
     col = 0
     for eff in catalogue:
         block = eff.design(data, train)
-        if block is None:
-            continue
-        if not block.all_finite():  # as the rules engine asks; a form with non-finite
-            continue  # columns among the alternatives loses the choice (_best_forms)
+        own = [] if block is None else [block, *block.alternatives]
+        further = eff.further_design(data, train)
+        if further is not None and further.all_finite():
+            own.append(further)
+        if not own or not own[0].all_finite():  # as the rules engine asks; a form with
+            continue  # non-finite columns among the alternatives loses the choice (_best_forms)
         extra = eff.imperfect(data, train) if eff.imperfect is not None else None
         if extra is not None and not extra.all_finite():
             extra = None
-        blocks = [with_imperfect(b, extra) for b in [block, *block.alternatives]]
+        blocks = [with_imperfect(b, extra) for b in own]
+        n_forms = sum(b.forms_searched for b in blocks)
         for b in blocks:
             mean, sd = group_prior(b, options.prior_sd_fraction)
             sd = _fill_sd(b, sd, data)
-            forms.append(Form(eff.name, b, slice(col, col + b.width), mean, sd, len(blocks)))
+            forms.append(Form(eff.name, b, slice(col, col + b.width), mean, sd, n_forms))
             col += b.width
     return forms
 

@@ -33,13 +33,11 @@ from orbitcal.diagnose.data import DiagnosisData
 from orbitcal.diagnose.model.evidence import Augmented, augment, model_evidence
 from orbitcal.diagnose.model.gram import Form, Gram, whitened_grams
 from orbitcal.diagnose.model.noise_model import AxisNoise, run_starts
+from orbitcal.diagnose.orbit_phase import orbital_period_s
 
 __all__ = ["CrossValidation", "cross_validated", "orbit_folds", "orbital_period_s"]
 
 IntArray = np.ndarray
-
-#: Standard gravitational parameter of the Earth [km^3/s^2] (WGS 84).
-MU_EARTH_KM3_S2 = 398600.4418
 
 
 @dataclass(frozen=True)
@@ -71,12 +69,6 @@ class CrossValidation:
             "kept": list(self.kept),
             "withdrawn": list(self.withdrawn),
         }
-
-
-def orbital_period_s(data: DiagnosisData) -> float:
-    """The period of a circular orbit at the track's mean geocentric distance [s]."""
-    r_km = float(np.mean(np.linalg.norm(data.r_itrs_km, axis=1)))
-    return float(2.0 * np.pi * np.sqrt(r_km**3 / MU_EARTH_KM3_S2))
 
 
 def orbit_folds(t_s: FloatArray, period_s: float) -> IntArray:

@@ -153,7 +153,7 @@ def model_status(md: ModelDiagnosis, options: ModelOptions) -> str:
             )
     parts.extend(s["statement"] for s in splits(md, options.selection_probability))
     mostly = sorted(
-        ((e, a) for e, a in md.absorbed.items() if a > 0.5 and e not in named),
+        ((e, a) for e, a in md.absorbed.items() if a > 0.5 and e not in (*named, *by_events)),
         key=lambda kv: -kv[1],
     )
     if mostly:
