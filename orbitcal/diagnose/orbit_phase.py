@@ -31,6 +31,7 @@ from orbitcal.diagnose.design import DesignBlock
 
 __all__ = [
     "MIN_ORBITS",
+    "MIN_WINDOW",
     "MU_EARTH_KM3_S2",
     "PHASE_GRID",
     "design_attitude_by_phase",
@@ -45,8 +46,14 @@ MU_EARTH_KM3_S2 = 398600.4418
 #: grid around the best window (4 s).
 PHASE_GRID = 360
 PHASE_FINE = 1440
+#: The shortest window, as a fraction of the orbit: a star tracker's Sun and Earth exclusion
+#: half-cones are 25-45 deg, so a head is blinded for at least ~1/20 of an orbit; a shorter window
+#: follows a few samples (a spike at the same phase of two orbits named it on a null world with
+#: spiky noise, tuning seed 20014 no. 33: a window of 1/1000 orbit).
+MIN_WINDOW = 1.0 / 24.0
 #: Windows the scan chooses among (coarse grid, then the fine grid around the best).
-WINDOWS_SEARCHED = PHASE_GRID * (PHASE_GRID // 2) + 81
+_SHORTEST = round(MIN_WINDOW * PHASE_GRID)
+WINDOWS_SEARCHED = PHASE_GRID * (PHASE_GRID // 2 - _SHORTEST + 1) + 81
 #: Orbits the training span must cover for the form to be written.
 MIN_ORBITS = 1.5
 #: At most this many training samples enter the scan (every k-th).
@@ -144,7 +151,7 @@ def _best_window(
     cum = np.vstack([np.zeros((1, per.shape[1])), np.cumsum(np.vstack([per[order]] * 2), axis=0)])
     ph2 = np.concatenate([ph, ph + 1.0])
     starts = np.arange(PHASE_GRID) / PHASE_GRID
-    lengths = np.arange(1, PHASE_GRID // 2 + 1) / PHASE_GRID
+    lengths = np.arange(_SHORTEST, PHASE_GRID // 2 + 1) / PHASE_GRID
     gain, best = _window_gains(cum, ph2, starts, lengths)
     if best is None:
         return None
@@ -155,8 +162,11 @@ def _best_window(
     best_fine: tuple[float, float] | None = None
     top = -np.inf
     for s0 in fine_starts:
-        lens = ((ends - s0) % 1.0)[None, :][0]
-        g, b = _window_gains(cum, ph2, np.array([s0]), np.sort(lens[(lens > 0) & (lens < 1)]))
+        lens = np.sort((ends - s0) % 1.0)
+        lens = lens[(lens >= MIN_WINDOW) & (lens <= 1.0 - MIN_WINDOW)]
+        if lens.size == 0:
+            continue
+        g, b = _window_gains(cum, ph2, np.array([s0]), lens)
         if b is not None and g > top:
             top, best_fine = g, b
     return best_fine if best_fine is not None and top >= gain else best
