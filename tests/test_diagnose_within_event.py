@@ -48,6 +48,12 @@ def _noise(kind: str, n: int, rng: np.random.Generator) -> np.ndarray:
         return out
     if kind == "random_walk":
         return np.cumsum(rng.normal(scale=0.5, size=(n, 3)), axis=0) + 0.5 * white
+    if kind == "pink":  # 1/f power, as the model calibration's pink worlds
+        spec = rng.normal(size=(n // 2 + 1, 3)) + 1j * rng.normal(size=(n // 2 + 1, 3))
+        f = np.fft.rfftfreq(n)
+        f[0] = f[1]
+        pink = np.fft.irfft(spec / np.sqrt(f)[:, None], n, axis=0)
+        return 0.5 * white + 2.0 * pink / np.std(pink, axis=0)
     if kind == "spiky":
         spikes = (rng.random((n, 1)) < 0.005) * rng.normal(scale=50.0, size=(n, 3))
         return white + spikes
@@ -68,13 +74,16 @@ def _currents(
     return out
 
 
-@pytest.mark.parametrize("kind", ["white", "ar1", "random_walk", "spiky"])
+KINDS = ["white", "ar1", "random_walk", "pink", "spiky"]
+
+
+@pytest.mark.parametrize("kind", KINDS)
 def test_within_event_test_has_its_stated_level_under_each_noise_kind(kind: str) -> None:
     """No currents: the test rejects at 0.05 in 0.5-2x 5 % of 300 final blocks (the noise
     model fitted, as the core does, on a training span of the same noise)."""
     data, index = _world()
     assert len(fac_events(data, index)) >= 4
-    rng = np.random.default_rng(["white", "ar1", "random_walk", "spiky"].index(kind))
+    rng = np.random.default_rng(KINDS.index(kind))
     noise = fit_noise(_noise(kind, 4000, rng), runs_of_index(np.arange(4000)), max_order=4)
     starts = run_starts(data, index, 1)
     trials, rejected = 300, 0

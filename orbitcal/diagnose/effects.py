@@ -154,10 +154,11 @@ class Effect:
         other effects' columns to take.
     further_forms : callable, optional
         ``further_forms(data, train) -> DesignBlock | None``: a form of the effect that only the
-        model core weighs, beside :meth:`design`'s (by evidence, its choice paid for as one
-        more form): the attitude error as a step function of the orbital phase
-        (:mod:`orbitcal.diagnose.orbit_phase`), whose 72 columns the rules engine's choice
-        among alternatives by the training BIC was never measured with.
+        model core weighs, beside :meth:`design`'s (by evidence, the scan behind it paid for
+        as its block's ``forms_searched``): the attitude error as a constant rotation inside one
+        window of the orbital phase (:mod:`orbitcal.diagnose.orbit_phase`, three columns),
+        which the rules engine's choice among alternatives by the training BIC was never
+        measured with.
     """
 
     name: str

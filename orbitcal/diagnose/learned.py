@@ -59,6 +59,7 @@ from scipy.optimize import least_squares
 
 from orbitcal.arrays import BoolArray, FloatArray
 from orbitcal.diagnose.effects import DiagnosisData
+from orbitcal.diagnose.orbit_phase import MU_EARTH_KM3_S2
 from orbitcal.field.synthesis import (
     EARTH_REFERENCE_RADIUS_KM,
     synth_internal_nec_nt,
@@ -107,7 +108,6 @@ NET_MIN_GAIN = 0.01
 #: effect the final model takes up the fit was a quarter of the diagnosis's time.
 LEARNED_MIN_TIMES_NOISE = 1.1
 _CHUNK = 1024
-_GM_EARTH_KM3_S2 = 398600.4418  # orbital period of the training samples, for the span check
 _POLE_EPS_RAD = 1e-9
 
 
@@ -290,7 +290,7 @@ def _sh_stage(
     # Contiguous folds of less than one orbit are pieces of the same arcs: their cross-validation
     # measures along-track interpolation, not the prediction of other passes.
     t = t_utc_s[train]
-    period_s = 2.0 * np.pi * np.sqrt(float(np.mean(radius_km[train])) ** 3 / _GM_EARTH_KM3_S2)
+    period_s = 2.0 * np.pi * np.sqrt(float(np.mean(radius_km[train])) ** 3 / MU_EARTH_KM3_S2)
     if nmax < 2 or n_folds < 2 or float(np.ptp(t)) < period_s:
         return {"degree": 0, "cap": nmax}
     ms = max(float(np.mean(y_nec[train] ** 2)), 1e-6)

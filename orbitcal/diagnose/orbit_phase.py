@@ -24,6 +24,7 @@ from functools import partial
 import numpy as np
 
 from orbitcal.arrays import BoolArray, FloatArray
+from orbitcal.diagnose.attitude_scan import _rotation_columns
 from orbitcal.diagnose.calibration_columns import calibration_rows
 from orbitcal.diagnose.columns import FunctionColumns, Index
 from orbitcal.diagnose.data import DiagnosisData
@@ -53,7 +54,9 @@ PHASE_FINE = 1440
 MIN_WINDOW = 1.0 / 24.0
 #: Windows the scan chooses among (coarse grid, then the fine grid around the best).
 _SHORTEST = round(MIN_WINDOW * PHASE_GRID)
-WINDOWS_SEARCHED = PHASE_GRID * (PHASE_GRID // 2 - _SHORTEST + 1) + 81
+#: The fine grid's steps either side of the best window's start and end.
+_FINE_HALF = 4
+WINDOWS_SEARCHED = PHASE_GRID * (PHASE_GRID // 2 - _SHORTEST + 1) + (2 * _FINE_HALF + 1) ** 2
 #: Orbits the training span must cover for the form to be written.
 MIN_ORBITS = 1.5
 #: At most this many training samples enter the scan (every k-th).
@@ -118,9 +121,8 @@ def _window_columns(
     data: DiagnosisData, phase: FloatArray, start: float, length: float, index: Index
 ) -> FloatArray:
     """``1[phase in window] (e_k x B) 1e-3`` at the samples ``index``, (m, 3, 3)."""
-    b = data.b_ref_body_nt[index]
     inside = _in_window(phase[index], start, length).astype(float)
-    cols = np.stack([np.cross(np.eye(3)[k], b) for k in range(3)], axis=2)
+    cols = _rotation_columns(data, index)
     return np.asarray(cols * (1e-3 * inside)[:, None, None])
 
 
@@ -133,8 +135,7 @@ def _best_window(
     y = data.b_raw_nt[idx].reshape(-1)
     r = y - q @ (q.T @ y)
     m = idx.size
-    rot = np.stack([np.cross(np.eye(3)[k], data.b_ref_body_nt[idx]) for k in range(3)], axis=2)
-    rot *= 1e-3
+    rot = 1e-3 * _rotation_columns(data, idx)  # per mrad
     q3 = q.reshape(m, 3, -1)
     # per sample: M = R^T R (3x3), K = Q^T R (12x3), v = R^T r (3), summed by window below
     per = np.concatenate(
@@ -156,7 +157,7 @@ def _best_window(
     if best is None:
         return None
     a, w = best
-    fine = np.arange(-4, 5) / PHASE_FINE
+    fine = np.arange(-_FINE_HALF, _FINE_HALF + 1) / PHASE_FINE
     ends = (a + w) + fine
     fine_starts = (a + fine) % 1.0
     best_fine: tuple[float, float] | None = None
