@@ -49,6 +49,7 @@ __all__ = [
     "SHRINK_MIN_BLOCKS",
     "Confirmation",
     "andrews_bandwidth",
+    "clark_west",
     "confirm",
     "newey_west_variance",
     "shrink_interval",
@@ -228,14 +229,21 @@ def confirm(
     blocks = block_samples if interval is not None else 0
     wb = _whitened(e_base_nt, noise, run_start)
     wm = _whitened(e_model_nt, noise, run_start)
+    z, p, gain = clark_west(wb, wm)
+    return Confirmation(before, after, p, z, n, gain, interval, blocks)
+
+
+def clark_west(w_base: FloatArray, w_model: FloatArray) -> tuple[float, float, float]:
+    """The test of :func:`confirm` on whitened errors (k, 3): its z statistic (1e9 for a
+    perfect forecast), one-sided p-value and ``gain_whitened``."""
+    wb, wm = w_base, w_model
     d = np.sum(wb**2 - (wm**2 - (wb - wm) ** 2), axis=1)
     gain = float(np.mean(np.sum(wb**2 - wm**2, axis=1))) if d.size else 0.0
     if d.size < 3:
-        return Confirmation(before, after, 1.0, 0.0, n, gain, interval, blocks)
+        return 0.0, 1.0, gain
     var = newey_west_variance(d)
     se = math.sqrt(var / d.size) if var > 0.0 else 0.0
     mean = float(np.mean(d))
     z = mean / se if se > 0.0 else (math.inf if mean > 0.0 else 0.0)
     p = 0.5 * math.erfc(z / math.sqrt(2.0)) if math.isfinite(z) else 0.0
-    z_out = float(z) if math.isfinite(z) else 1e9
-    return Confirmation(before, after, float(p), z_out, n, gain, interval, blocks)
+    return (float(z) if math.isfinite(z) else 1e9), float(p), gain
