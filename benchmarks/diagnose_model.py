@@ -131,7 +131,7 @@ def _draw_effects(
         if len(present) <= options.max_effects:
             break
     field = np.zeros((base.data.n, 3))
-    for e in present:
+    for e in sorted(present):  # a set of names: its order changes with the hash seed
         forms = [f for f in base.forms if f.effect == e]
         form = forms[int(rng.integers(len(forms)))]
         theta = form.prior_mean + form.prior_sd * rng.normal(size=form.prior_sd.size)
