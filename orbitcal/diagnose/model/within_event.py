@@ -17,7 +17,10 @@ Its form is confirmed on the final block instead, once, without any step having 
   with a Newey & West variance, and the same "closer" condition, as the forecast confirmation;
 * its p-value is a Monte Carlo one (:data:`EVENT_SHIFTS` circular shifts of the residual against
   the events' columns, :func:`shifted_statistics`): the statistic's rank among the same
-  statistic on residuals that hold the block's own noise at samples that are not the events'.
+  statistic on the block's residual moved to other samples, with its own persistence and
+  spikes. Its cost is power: a block of an orbit holds two to four crossings, which bound the
+  studentised statistic near 2, and a shift can carry one crossing's field onto another
+  (``docs/design.md``: the auroral currents of our simulator named in 11 of 19 blind worlds).
   Read from the normal distribution, as the forecast confirmation's is, the statistic assumed
   that the out-of-fold predictions are independent of the samples they predict. They are not
   where the noise persists from a chunk to the next beyond what the noise model whitens, or
@@ -145,8 +148,8 @@ def event_confirmation(
     The p-value is a Monte Carlo one: the rank of the test's statistic among the same statistic
     on the residual circularly shifted against the events by ``shifts`` offsets spread over the
     block (:func:`shifted_statistics`). A shifted residual holds the block's noise, with all its
-    persistence and its spikes, at samples that are not the events': under no event field it is
-    drawn as the residual is, whatever the noise model missed."""
+    persistence and its spikes, at other samples: under no event field and a noise stationary
+    over the block it is drawn as the residual is, whatever the noise model missed."""
     sigma = [n.sigma_nt for n in noise] if sigma_nt is None else sigma_nt
     pred = event_prediction(data, index, residual_nt, effect, sigma, prior_sd_fraction, scale)
     if pred is None:
