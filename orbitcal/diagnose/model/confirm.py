@@ -53,6 +53,7 @@ __all__ = [
     "confirm",
     "newey_west_variance",
     "shrink_interval",
+    "whitened_rows",
 ]
 
 #: Central probability of the shrink's bootstrap interval.
@@ -201,7 +202,9 @@ def newey_west_variance(d: FloatArray, bandwidth: int | None = None) -> float:
     return max(var, 0.0)
 
 
-def _whitened(e: FloatArray, noise: Sequence[AxisNoise], run_start: np.ndarray) -> FloatArray:
+def whitened_rows(e: FloatArray, noise: Sequence[AxisNoise], run_start: np.ndarray) -> FloatArray:
+    """``e`` (m, 3) or (m, 3, s) whitened per axis by ``noise``, the rows whose whitening is
+    complete."""
     out = np.zeros_like(e)
     valid = np.ones(e.shape[0], dtype=bool)
     for i, nz in enumerate(noise):
@@ -227,8 +230,8 @@ def confirm(
         return Confirmation(before, after, 1.0, 0.0, n)
     interval = shrink_interval(e_base_nt, e_model_nt, block_samples) if block_samples else None
     blocks = block_samples if interval is not None else 0
-    wb = _whitened(e_base_nt, noise, run_start)
-    wm = _whitened(e_model_nt, noise, run_start)
+    wb = whitened_rows(e_base_nt, noise, run_start)
+    wm = whitened_rows(e_model_nt, noise, run_start)
     z, p, gain = clark_west(wb, wm)
     return Confirmation(before, after, p, z, n, gain, interval, blocks)
 

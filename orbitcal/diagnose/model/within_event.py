@@ -46,7 +46,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -55,7 +55,7 @@ from orbitcal.arrays import FloatArray, IntArray
 from orbitcal.diagnose.data import DiagnosisData
 from orbitcal.diagnose.effects import Effect
 from orbitcal.diagnose.event_design import Event
-from orbitcal.diagnose.model.confirm import Confirmation, clark_west, confirm
+from orbitcal.diagnose.model.confirm import Confirmation, clark_west, confirm, whitened_rows
 from orbitcal.diagnose.model.gram import ranges_prior
 from orbitcal.diagnose.model.noise_model import AxisNoise, filtered, fit_noise, run_starts
 from orbitcal.diagnose.options import ModelOptions
@@ -84,15 +84,18 @@ def event_prediction(
     sigma_nt: Sequence[float],
     prior_sd_fraction: float,
     scale: float = 1.0,
+    events: Sequence[Event] | None = None,
 ) -> FloatArray | None:
     """The out-of-fold prediction of ``residual_nt`` (the samples ``index``, (m, 3) [nT], or
-    (m, 3, s): s residuals at once) by ``effect``'s events, zero outside them, each event's
-    amplitudes the posterior mean under its prior (its width times ``scale``) and white noise of
-    ``sigma_nt`` per axis; None when the block holds no event."""
+    (m, 3, s): s residuals at once) by ``effect``'s events (``events`` if given, else found),
+    zero outside them, each event's amplitudes the posterior mean under its prior (its width
+    times ``scale``) and white noise of ``sigma_nt`` per axis; None when the block holds no
+    event."""
     design = effect.event_design
     if design is None:
         return None
-    events = design.events(data, index)
+    if events is None:
+        events = design.events(data, index)
     if not events:
         return None
     t_s = data.t_utc_s[index]
@@ -151,13 +154,19 @@ def event_confirmation(
     persistence and its spikes, at other samples: under no event field and a noise stationary
     over the block it is drawn as the residual is, whatever the noise model missed."""
     sigma = [n.sigma_nt for n in noise] if sigma_nt is None else sigma_nt
-    pred = event_prediction(data, index, residual_nt, effect, sigma, prior_sd_fraction, scale)
+    design = effect.event_design
+    events = design.events(data, index) if design is not None else []
+
+    def predict(residual: FloatArray) -> FloatArray | None:
+        return event_prediction(
+            data, index, residual, effect, sigma, prior_sd_fraction, scale, events
+        )
+
+    pred = predict(residual_nt)
     if pred is None:
         return None
     conf = confirm(residual_nt, residual_nt - pred, noise, run_start, block_samples)
-    null = shifted_statistics(
-        data, index, residual_nt, effect, noise, run_start, prior_sd_fraction, sigma, scale, shifts
-    )
+    null = shifted_statistics(residual_nt, predict, noise, run_start, shifts)
     if null.size == 0:
         return conf
     p = (1.0 + float(np.sum(null >= conf.statistic))) / (null.size + 1.0)
@@ -165,19 +174,15 @@ def event_confirmation(
 
 
 def shifted_statistics(
-    data: DiagnosisData,
-    index: IntArray,
     residual_nt: FloatArray,
-    effect: Effect,
+    predict: Callable[[FloatArray], FloatArray | None],
     noise: Sequence[AxisNoise],
     run_start: IntArray,
-    prior_sd_fraction: float,
-    sigma_nt: Sequence[float],
-    scale: float,
     shifts: int = EVENT_SHIFTS,
 ) -> FloatArray:
     """The within-event test's z statistic on ``residual_nt`` rolled by each of ``shifts``
-    offsets spread evenly over the block's samples (every offset once when there are fewer)."""
+    offsets spread evenly over the block's samples (every offset once when there are fewer),
+    ``predict`` giving the events' out-of-fold prediction of (m, 3, s) residuals at once."""
     m = residual_nt.shape[0]
     offsets = np.unique(np.round(np.arange(1, shifts + 1) * m / (shifts + 1.0)).astype(np.intp))
     offsets = offsets[(offsets > 0) & (offsets < m)]
@@ -185,26 +190,14 @@ def shifted_statistics(
     for lo in range(0, offsets.size, _SHIFT_BATCH):
         batch = offsets[lo : lo + _SHIFT_BATCH]
         rolled = np.stack([np.roll(residual_nt, int(k), axis=0) for k in batch], axis=2)
-        pred = event_prediction(data, index, rolled, effect, sigma_nt, prior_sd_fraction, scale)
+        pred = predict(rolled)
         if pred is None:
             return np.zeros(0)
-        wb, valid = _whitened_batch(rolled, noise, run_start)
-        wm, _ = _whitened_batch(rolled - pred, noise, run_start)
+        wb = whitened_rows(rolled, noise, run_start)
+        wm = whitened_rows(rolled - pred, noise, run_start)
         for j in range(batch.size):
-            out.append(clark_west(wb[valid, :, j], wm[valid, :, j])[0])
+            out.append(clark_west(wb[:, :, j], wm[:, :, j])[0])
     return np.asarray(out)
-
-
-def _whitened_batch(
-    e: FloatArray, noise: Sequence[AxisNoise], run_start: IntArray
-) -> tuple[FloatArray, np.ndarray]:
-    """``e`` (m, 3, s) whitened per axis, and the rows whose whitening is complete."""
-    out = np.zeros_like(e)
-    valid = np.ones(e.shape[0], dtype=bool)
-    for i, nz in enumerate(noise):
-        out[:, i, :], ok = nz.whiten(e[:, i, :], run_start)
-        valid &= ok
-    return out, valid
 
 
 def _run_ends(run_start: IntArray) -> IntArray:
