@@ -105,7 +105,9 @@ def design_attitude(
     periods = ATTITUDE_PERIODS_S[longest > ATTITUDE_PERIODS_S]
     if periods.size == 0:
         return None
-    scan = AttitudeScan(data, train, fixed, longest_s=longest, drift=_drift_block(data, train))
+    scan = AttitudeScan(
+        data, train, fixed, longest_s=longest, drift=_drift_block(data, train), grid_s=periods
+    )
     # The scan needs, per period, only 6 x 6 and 6 x q sums over the samples: the gain of the
     # projected columns P[R c, R s] (P = I - QQ^T, R = rotation columns, c, s = cos, sin) is
     # g^T (G + eps tr(G) I)^-1 g with G = A - B^T B, A = [[sum c^2 M, sum cs M], [., sum s^2 M]],
@@ -362,6 +364,7 @@ class AttitudeScan:
         *,
         longest_s: float = np.inf,
         drift: DesignBlock | None = None,
+        grid_s: FloatArray | None = None,
     ) -> None:
         self.data = data
         self.longest_s = float(longest_s)
@@ -381,6 +384,11 @@ class AttitudeScan:
         # ~0.4 MB each for the first two, 0.1 MB per column for the last).
         self._q_of: FloatArray | None = None
         self._q: dict[int, FloatArray] = {}
+        self._k_of: FloatArray | None = None
+        self._k: dict[int, FloatArray] = {}
+        #: The periods scanned [s], ascending (:meth:`trig`); None: none tabulated.
+        self.grid_s = None if grid_s is None else np.asarray(grid_s, dtype=np.float64)
+        self._grid_trig: dict[int, tuple[FloatArray, FloatArray]] = {}
         self._rot = [_rotation_columns(data, self.idx[a0:a1]) * 1e-3 for a0, a1 in self.blocks()]
         self._rtr = [np.matmul(np.swapaxes(r, 1, 2), r).reshape(-1, 9) for r in self._rot]
         self._base = [
@@ -470,6 +478,43 @@ class AttitudeScan:
                 self._q[a0] = q
         return q
 
+    def k_rows(self, basis: tuple[tuple[float, ...], FloatArray], a0: int, a1: int) -> FloatArray:
+        """``K = Q^T R`` per sample of the block, (m, 3 q): what :meth:`gains` sums against the
+        sinusoids of every period tried. The latest basis's are kept like its rows of ``Q``
+        (a beam step asks for the gains of one basis on four grids of periods)."""
+        if self._k_of is not basis[1]:
+            self._k_of, self._k = basis[1], {}
+        k_blk = self._k.get(a0)
+        if k_blk is None:
+            m, n_q = a1 - a0, basis[1].shape[1]
+            q3 = self.q_rows(basis, a0, a1).reshape(m, 3, n_q)
+            rt = self.rot(a0, a1)
+            k3 = q3[:, 0, :, None] * rt[:, 0, None, :]
+            for i in (1, 2):
+                k3 += q3[:, i, :, None] * rt[:, i, None, :]
+            k_blk = k3.reshape(m, -1)
+            if 3 * self.n * n_q * 8 <= SCAN_Q_CACHE_BYTES:
+                self._k[a0] = k_blk
+        return k_blk
+
+    def trig(
+        self, periods_s: FloatArray, w_rad_s: FloatArray, a0: int, a1: int
+    ) -> tuple[FloatArray, FloatArray]:
+        """``cos(w t)`` and ``sin(w t)`` of the block, (periods, m) (:func:`_cos_sin`). Periods
+        of the scan's grid (:attr:`grid_s`, ascending) are read from a table of the whole grid
+        built once per block: each step of the beam search asks for the grid less the periods
+        it holds."""
+        g = self.grid_s
+        if g is not None and len(periods_s):
+            pos = np.minimum(np.searchsorted(g, periods_s), g.size - 1)
+            if np.array_equal(g[pos], periods_s):
+                table = self._grid_trig.get(a0)
+                if table is None:
+                    table = _cos_sin(2 * np.pi / g, self.t[a0:a1])
+                    self._grid_trig[a0] = table
+                return table[0][pos], table[1][pos]
+        return _cos_sin(w_rad_s, self.t[a0:a1])
+
     def residual(self, basis: tuple[tuple[float, ...], FloatArray]) -> FloatArray:
         """``y - Q Q^T y`` over the training rows, (3 n,)."""
         qty = np.zeros(basis[1].shape[1])
@@ -497,14 +542,10 @@ class AttitudeScan:
         for a0, a1 in self.blocks():
             m = a1 - a0
             rt = self.rot(a0, a1)
-            q3 = self.q_rows(basis, a0, a1).reshape(m, 3, n_q)
             m_blk = self._rtr[a0 // SCAN_BLOCK_SAMPLES]
-            k_blk = q3[:, 0, :, None] * rt[:, 0, None, :]  # K = Q^T R per sample
-            for i in (1, 2):
-                k_blk += q3[:, i, :, None] * rt[:, i, None, :]
-            k_blk = k_blk.reshape(m, -1)
+            k_blk = self.k_rows(basis, a0, a1)
             v_blk = np.matmul(r_now[3 * a0 : 3 * a1].reshape(m, 1, 3), rt)[:, 0, :]
-            c, s_ = _cos_sin(w, self.t[a0:a1])
+            c, s_ = self.trig(periods_s, w, a0, a1)
             acc_m[0] += (c * c) @ m_blk
             acc_m[1] += (c * s_) @ m_blk
             acc_m[2] += (s_ * s_) @ m_blk
