@@ -37,7 +37,9 @@ HOLDOUT_BLOCKS = 3
 #: Threads of a selection step (:attr:`AttributionOptions.workers`): the candidates' fits are
 #: independent. Much of a fit holds the interpreter (small products), so two threads gain a
 #: little: the torquer day at 1 Hz of ``benchmarks/diagnose_timing.py`` took 6.8 s of wall time
-#: against 7.3 s with one (8.2 s of CPU against 7.6), the same report to the bit.
+#: against 7.3 s with one (8.2 s of CPU against 7.6), the same report to the bit. With two or
+#: more, the model core also runs on a thread of its own beside the rules engine
+#: (``orbitcal.diagnose.api._model_core_started``).
 DEFAULT_WORKERS = 2
 
 #: Crustal model used as the crustal_field candidate (Olsen et al. 2017).
@@ -75,7 +77,8 @@ class AttributionOptions:
     workers : int
         Threads that fit the candidates of a selection step side by side (at most the machine's
         cores; 1: one after the other). Each candidate's fit is computed alone in its thread,
-        with one BLAS thread, so the result does not depend on it.
+        with one BLAS thread, so the result does not depend on it. With two or more, the model
+        core runs on a thread of its own beside the rules engine (same result).
     """
 
     n_blocks: int = N_BLOCKS
