@@ -205,27 +205,16 @@ def _run(
     return Diagnosis(report=Report.from_json(document), attribution=final_att, data=data)
 
 
-def _model_core(
-    data: DiagnosisData, options: DiagnosisOptions, fit_mask: BoolArray | None
-) -> ModelDiagnosis:
-    """The model core (:mod:`orbitcal.diagnose.model`) on the rules engine's training span and
-    final block: the numbers of the report's ``probability``, ``verdict_probability``,
-    ``confirmation`` and ``model`` keys (and, under ``options.model.engine == "model"``, its
-    verdict)."""
-    from orbitcal.diagnose.attribution.engine import training_split
-    from orbitcal.diagnose.model import model_diagnosis
-
-    train, holdout = training_split(data, options.attribution, fit_mask)
-    return model_diagnosis(data, train, holdout, options.model)
-
-
 def _model_core_started(
     data: DiagnosisData,
     options: DiagnosisOptions,
     fit_mask: BoolArray | None,
     stack: ExitStack,
 ) -> Callable[[], ModelDiagnosis]:
-    """The model core's result, to be asked for once the rules engine's report is built.
+    """The model core's result (:mod:`orbitcal.diagnose.model`, on the rules engine's training
+    span and final block: the numbers of the report's ``probability``, ``verdict_probability``,
+    ``confirmation`` and ``model`` keys), to be asked for once the rules engine's report is
+    built.
 
     The two engines read the same prepared data and share nothing they write but the catalogue's
     design blocks (:meth:`Effect.design`, kept per data set). With two or more selection
@@ -241,17 +230,22 @@ def _model_core_started(
     """
     from orbitcal.diagnose.attribution.engine import training_split
     from orbitcal.diagnose.effects import CATALOGUE
+    from orbitcal.diagnose.model import model_diagnosis
+
+    def after() -> ModelDiagnosis:
+        train, holdout = training_split(data, options.attribution, fit_mask)
+        return model_diagnosis(data, train, holdout, options.model)
 
     if min(options.attribution.workers, os.cpu_count() or 1) < 2:
-        return lambda: _model_core(data, options, fit_mask)
+        return after
     try:
-        train, _ = training_split(data, options.attribution, fit_mask)
+        train, holdout = training_split(data, options.attribution, fit_mask)
     except NotEnoughDataError:  # the rules engine says so, in its own words
-        return lambda: _model_core(data, options, fit_mask)
+        return after
     for eff in CATALOGUE:
         eff.design(data, train)
     pool = stack.enter_context(ThreadPoolExecutor(1, thread_name_prefix="orbitcal-model-core"))
-    return pool.submit(_model_core, data, options, fit_mask).result
+    return pool.submit(model_diagnosis, data, train, holdout, options.model).result
 
 
 def _learned_summary(

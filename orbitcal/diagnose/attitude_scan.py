@@ -17,7 +17,7 @@ were missed on seeds 10400-10900 (`benchmarks/results/diagnose_independent.md`).
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from functools import partial
 
 import numpy as np
@@ -63,7 +63,8 @@ ATTITUDE_REFINE_PASSES = 8
 #: Sets of periods carried from one greedy step of the scan to the next (beam search).
 ATTITUDE_BEAM = 3
 
-#: The rows of the scan's orthonormal basis are kept between its uses up to this size [B].
+#: The rows of the scan's orthonormal basis (and their products K with the rotation columns) are
+#: kept between their uses when the rows of Q take at most this size [B].
 SCAN_Q_CACHE_BYTES = 16 * 2**20
 
 #: Samples per block of the batched period scan (memory ~ periods x block x 8 B per array).
@@ -382,10 +383,9 @@ class AttitudeScan:
         # Per block, what no period changes: the rotation columns, their products R^T R and the
         # columns of the calibration and of ``fixed`` (at most SCAN_MAX_SAMPLES samples:
         # ~0.4 MB each for the first two, 0.1 MB per column for the last).
-        self._q_of: FloatArray | None = None
-        self._q: dict[int, FloatArray] = {}
-        self._k_of: FloatArray | None = None
-        self._k: dict[int, FloatArray] = {}
+        # the latest basis's rows of Q and K per block (:meth:`_kept`)
+        self._kept_of: FloatArray | None = None
+        self._per_block: dict[tuple[str, int], FloatArray] = {}
         #: The periods scanned [s], ascending (:meth:`trig`); None: none tabulated.
         self.grid_s = None if grid_s is None else np.asarray(grid_s, dtype=np.float64)
         self._grid_trig: dict[int, tuple[FloatArray, FloatArray]] = {}
@@ -467,39 +467,46 @@ class AttitudeScan:
         return tuple(periods), np.asarray(vt[keep].T / s[keep])
 
     def q_rows(self, basis: tuple[tuple[float, ...], FloatArray], a0: int, a1: int) -> FloatArray:
-        """Rows of ``Q`` of the block; those of the latest basis are kept when they are small
-        (its residual and gains read them three times)."""
-        if self._q_of is not basis[1]:
-            self._q_of, self._q = basis[1], {}
-        q = self._q.get(a0)
-        if q is None:
-            q = np.asarray(self.columns(basis[0], a0, a1) @ basis[1])
-            if 3 * self.n * basis[1].shape[1] * 8 <= SCAN_Q_CACHE_BYTES:
-                self._q[a0] = q
-        return q
+        """Rows of ``Q`` of the block (its residual and gains read them three times)."""
+        return self._kept(
+            basis, "q", a0, lambda: np.asarray(self.columns(basis[0], a0, a1) @ basis[1])
+        )
 
     def k_rows(self, basis: tuple[tuple[float, ...], FloatArray], a0: int, a1: int) -> FloatArray:
         """``K = Q^T R`` per sample of the block, (m, 3 q): what :meth:`gains` sums against the
-        sinusoids of every period tried. The latest basis's are kept like its rows of ``Q``
-        (a beam step asks for the gains of one basis on four grids of periods)."""
-        if self._k_of is not basis[1]:
-            self._k_of, self._k = basis[1], {}
-        k_blk = self._k.get(a0)
-        if k_blk is None:
+        sinusoids of every period tried (a beam step asks for the gains of one basis on four
+        grids of periods)."""
+
+        def build() -> FloatArray:
             m, n_q = a1 - a0, basis[1].shape[1]
             q3 = self.q_rows(basis, a0, a1).reshape(m, 3, n_q)
             rt = self.rot(a0, a1)
             k3 = q3[:, 0, :, None] * rt[:, 0, None, :]
             for i in (1, 2):
                 k3 += q3[:, i, :, None] * rt[:, i, None, :]
-            k_blk = k3.reshape(m, -1)
-            if 3 * self.n * n_q * 8 <= SCAN_Q_CACHE_BYTES:
-                self._k[a0] = k_blk
-        return k_blk
+            return k3.reshape(m, -1)
 
-    def trig(
-        self, periods_s: FloatArray, w_rad_s: FloatArray, a0: int, a1: int
-    ) -> tuple[FloatArray, FloatArray]:
+        return self._kept(basis, "k", a0, build)
+
+    def _kept(
+        self,
+        basis: tuple[tuple[float, ...], FloatArray],
+        kind: str,
+        a0: int,
+        build: Callable[[], FloatArray],
+    ) -> FloatArray:
+        """A per-block array (``kind``) of the latest basis: built once and kept while that basis
+        is the latest, when its rows of ``Q`` take at most :data:`SCAN_Q_CACHE_BYTES`."""
+        if self._kept_of is not basis[1]:
+            self._kept_of, self._per_block = basis[1], {}
+        out = self._per_block.get((kind, a0))
+        if out is None:
+            out = build()
+            if 3 * self.n * basis[1].shape[1] * 8 <= SCAN_Q_CACHE_BYTES:
+                self._per_block[(kind, a0)] = out
+        return out
+
+    def trig(self, periods_s: FloatArray, a0: int, a1: int) -> tuple[FloatArray, FloatArray]:
         """``cos(w t)`` and ``sin(w t)`` of the block, (periods, m) (:func:`_cos_sin`). Periods
         of the scan's grid (:attr:`grid_s`, ascending) are read from a table of the whole grid
         built once per block: each step of the beam search asks for the grid less the periods
@@ -513,7 +520,7 @@ class AttitudeScan:
                     table = _cos_sin(2 * np.pi / g, self.t[a0:a1])
                     self._grid_trig[a0] = table
                 return table[0][pos], table[1][pos]
-        return _cos_sin(w_rad_s, self.t[a0:a1])
+        return _cos_sin(2 * np.pi / np.asarray(periods_s, dtype=np.float64), self.t[a0:a1])
 
     def residual(self, basis: tuple[tuple[float, ...], FloatArray]) -> FloatArray:
         """``y - Q Q^T y`` over the training rows, (3 n,)."""
@@ -534,8 +541,7 @@ class AttitudeScan:
     ) -> FloatArray:
         """Gain in fit of the 6 columns of each period, projected off the basis."""
         n_q = basis[1].shape[1]
-        w = 2 * np.pi / np.asarray(periods_s, dtype=np.float64)
-        p_n = w.size
+        p_n = len(periods_s)
         acc_m = np.zeros((3, p_n, 9))
         acc_k = np.zeros((2, p_n, 3 * n_q))
         acc_v = np.zeros((2, p_n, 3))
@@ -545,7 +551,7 @@ class AttitudeScan:
             m_blk = self._rtr[a0 // SCAN_BLOCK_SAMPLES]
             k_blk = self.k_rows(basis, a0, a1)
             v_blk = np.matmul(r_now[3 * a0 : 3 * a1].reshape(m, 1, 3), rt)[:, 0, :]
-            c, s_ = self.trig(periods_s, w, a0, a1)
+            c, s_ = self.trig(periods_s, a0, a1)
             acc_m[0] += (c * c) @ m_blk
             acc_m[1] += (c * s_) @ m_blk
             acc_m[2] += (s_ * s_) @ m_blk
