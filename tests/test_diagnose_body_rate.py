@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from orbitcal.diagnose.data import DiagnosisData
+from orbitcal.diagnose.data import DiagnosisData, log_map
 
 
 def _data(t_s: np.ndarray, body_to_itrs: Rotation) -> DiagnosisData:
@@ -69,3 +69,20 @@ def test_uneven_steps_and_gaps_keep_the_chord() -> None:
     true = _true_rate(t, 1.0, 300.0)
     err = np.linalg.norm(w - true, axis=1) / np.linalg.norm(true, axis=1)
     assert np.all(np.isfinite(w)) and np.all(err < 0.05)
+
+
+def test_the_log_map_agrees_with_scipy_from_zero_to_a_half_turn() -> None:
+    """The closed form (small angles, by its series near zero) and the quaternion fall-back
+    beyond 2 rad give scipy's rotation vectors to rounding, at every angle a relative rotation
+    between samples can have."""
+    rng = np.random.default_rng(11)
+    for angle_rad in (0.0, 1e-12, 1e-7, 1e-6, 1e-3, 0.3, 1.5, 1.99, 2.01, 3.0, np.pi - 1e-9):
+        axes = rng.normal(size=(200, 3))
+        rotvec = axes * angle_rad / np.linalg.norm(axes, axis=1, keepdims=True)
+        matrices = Rotation.from_rotvec(rotvec).as_matrix()
+        got = log_map(matrices)
+        want = Rotation.from_matrix(matrices).as_rotvec()
+        if angle_rad < np.pi - 1e-6:
+            np.testing.assert_allclose(got, want, rtol=0, atol=1e-14)
+        else:  # +-pi: the same rotation either way round
+            np.testing.assert_allclose(np.linalg.norm(got, axis=1), np.pi - 1e-9, atol=1e-6)

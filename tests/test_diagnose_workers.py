@@ -15,6 +15,7 @@ from test_diagnose_worlds import make_world
 import orbitcal.diagnose.api as api
 import orbitcal.diagnose.model as model
 from orbitcal.diagnose.api import diagnose_data
+from orbitcal.diagnose.effects import CATALOGUE
 from orbitcal.diagnose.options import DiagnosisOptions, ModelOptions
 
 
@@ -73,3 +74,25 @@ def test_the_model_core_runs_beside_the_rules_engine_and_its_errors_reach_the_ca
     for workers in (1, 2):
         with pytest.raises(ValueError, match="the model core failed"):
             diagnose_data(data, options=_options(workers), rng=np.random.default_rng(0))
+
+
+def test_designs_built_on_two_threads_are_each_built_once_and_kept(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The catalogue's blocks are built two at a time before the model core starts: every
+    effect's build runs once, on a builder thread, and what the engines ask for afterwards is
+    the kept block (no entry of the cache is lost to the other thread)."""
+    monkeypatch.setattr(api.os, "cpu_count", lambda: 2)
+    builds: list[tuple[str, str]] = []
+    for eff in CATALOGUE:
+
+        def counted(data: object, train: object, _real: object = eff.build, _n: str = eff.name):
+            builds.append((_n, threading.current_thread().name))
+            return _real(data, train)  # type: ignore[operator]
+
+        monkeypatch.setitem(eff.__dict__, "build", counted)
+    data = make_world("magnetorquer", seed=5, attitude="tumbling").data
+    diagnose_data(data, options=_options(2), rng=np.random.default_rng(0))
+    names = [n for n, _ in builds]
+    assert sorted(names) == sorted(e.name for e in CATALOGUE)
+    assert {t.split("_")[0] for _, t in builds} == {"orbitcal-design"}

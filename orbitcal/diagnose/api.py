@@ -242,8 +242,10 @@ def _model_core_started(
         train, holdout = training_split(data, options.attribution, fit_mask)
     except NotEnoughDataError:  # the rules engine says so, in its own words
         return after
-    for eff in CATALOGUE:
-        eff.design(data, train)
+    # the blocks two at a time, the scanned ones (the longest) first
+    with ThreadPoolExecutor(2, thread_name_prefix="orbitcal-design") as builders:
+        ordered = sorted(CATALOGUE, key=lambda eff: not eff.rescanned_beside_others)
+        list(builders.map(lambda eff: eff.design(data, train), ordered))
     pool = stack.enter_context(ThreadPoolExecutor(1, thread_name_prefix="orbitcal-model-core"))
     return pool.submit(model_diagnosis, data, train, holdout, options.model).result
 

@@ -24,6 +24,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import importlib
+import threading
 import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -191,12 +192,13 @@ class Effect:
         engine and the model core (:mod:`orbitcal.diagnose.model`) ask for the same blocks, and
         a scan (the attitude error's periods) takes seconds on a day at 1 Hz."""
         key = (self.name, hashlib.blake2b(np.packbits(train).tobytes(), digest_size=16).digest())
-        ref, held = _DESIGNS.get(id(data), (None, {}))
-        if ref is None or ref() is not data:
-            held = {}
-            _DESIGNS[id(data)] = (weakref.ref(data), held)
-            for stale in [k for k, (r, _) in _DESIGNS.items() if r() is None]:
-                del _DESIGNS[stale]
+        with _DESIGNS_LOCK:  # effects' designs are built on threads side by side (api.py)
+            ref, held = _DESIGNS.get(id(data), (None, {}))
+            if ref is None or ref() is not data:
+                held = {}
+                _DESIGNS[id(data)] = (weakref.ref(data), held)
+                for stale in [k for k, (r, _) in _DESIGNS.items() if r() is None]:
+                    del _DESIGNS[stale]
         if key not in held:
             held[key] = _owned(self.build(data, train), self.name)
         return held[key]
@@ -233,6 +235,8 @@ class Effect:
 #: Design blocks per data object (by id, with a weak reference that tells a reused id): per
 #: (effect, training samples), the block or None (:meth:`Effect.design`).
 _DESIGNS: dict[int, tuple[Any, dict[tuple[str, bytes], DesignBlock | None]]] = {}
+#: Guards :data:`_DESIGNS`'s entries (one effect's block is built by one thread at a time).
+_DESIGNS_LOCK = threading.Lock()
 
 
 def _owned(block: DesignBlock | None, effect: str) -> DesignBlock | None:
