@@ -219,14 +219,17 @@ def _model_core_started(
     The two engines read the same prepared data and share nothing they write but the catalogue's
     design blocks (:meth:`Effect.design`, kept per data set). With two or more selection
     workers (:attr:`AttributionOptions.workers`) on a machine of two or more cores, those
-    blocks are built first (the attitude error's period scan: a second on a day at 1 Hz, which
-    both engines would otherwise make) and the model core then runs on a thread of its own,
-    beside the rules engine. On the torquer day at 1 Hz of ``benchmarks/diagnose_timing.py``
-    (three pairs against the serial order, same report to the bit): median 0.91x the wall time,
-    1.07x the CPU time (both threads hold the interpreter for much of their work), 563-581 MB
-    of peak memory against 506-546 (both engines' arrays alive at once). Otherwise it runs
-    when asked, after the rules engine, as before. The thread is joined when ``stack`` closes;
-    an error in it is raised when the result is asked for.
+    blocks are built first, two at a time, the scanned ones first (the attitude error's period
+    scan: 0.8-0.9 s on a day at 1 Hz, which both engines would otherwise make; beside it the
+    others, the time offset's body rate the longest), and the model core then runs on a thread
+    of its own, beside the rules engine. On the torquer day at 1 Hz of
+    ``benchmarks/diagnose_timing.py`` (three pairs against the serial order, same report to the
+    bit): median 0.91x the wall time, 1.07x the CPU time (both threads hold the interpreter for
+    much of their work), 563-581 MB of peak memory against 506-546 (both engines' arrays alive
+    at once); building the blocks two at a time rather than one after the other took a further
+    0.904x of the wall over six pairs (twenty-fourth session, the timing page). Otherwise it
+    runs when asked, after the rules engine, as before. The thread is joined when ``stack``
+    closes; an error in it is raised when the result is asked for.
     """
     from orbitcal.diagnose.attribution.engine import training_split
     from orbitcal.diagnose.effects import CATALOGUE

@@ -235,7 +235,9 @@ class Effect:
 #: Design blocks per data object (by id, with a weak reference that tells a reused id): per
 #: (effect, training samples), the block or None (:meth:`Effect.design`).
 _DESIGNS: dict[int, tuple[Any, dict[tuple[str, bytes], DesignBlock | None]]] = {}
-#: Guards :data:`_DESIGNS`'s entries (one effect's block is built by one thread at a time).
+#: Guards the creation of a data object's entry in :data:`_DESIGNS`. The blocks are built
+#: outside it: the builder threads (``api._model_core_started``) ask for different effects, and
+#: the engines ask only once they are all built.
 _DESIGNS_LOCK = threading.Lock()
 
 
