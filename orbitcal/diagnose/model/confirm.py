@@ -1,9 +1,10 @@
 """One confirmation of the chosen model on a final block of time no selection step saw.
 
 The chosen model (fitted on the training span) and the calibration alone (fitted there too) both
-forecast the final block; their errors are whitened by the training span's noise model and
-compared sample by sample with the Clark & West (2007) adjusted loss difference of nested
-models,
+forecast the final block (their columns and their noise models' forecast from the training
+residual, :func:`~orbitcal.diagnose.model.noise_model.forecast_noise`); their errors are
+whitened by the training span's noise model and compared sample by sample with the Clark &
+West (2007) adjusted loss difference of nested models,
 
     d_t = sum_axes [ w_base^2 - (w_model^2 - (w_base - w_model)^2) ],
 

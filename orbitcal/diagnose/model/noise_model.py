@@ -26,13 +26,22 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+from scipy.signal import lfilter, lfiltic
 
 from orbitcal.arrays import FloatArray
 
 if TYPE_CHECKING:
     from orbitcal.diagnose.data import DiagnosisData
 
-__all__ = ["AxisNoise", "fit_axis_noise", "fit_noise", "noise_skip", "run_starts", "runs_of_index"]
+__all__ = [
+    "AxisNoise",
+    "fit_axis_noise",
+    "fit_noise",
+    "forecast_noise",
+    "noise_skip",
+    "run_starts",
+    "runs_of_index",
+]
 
 IntArray = np.ndarray
 
@@ -272,3 +281,49 @@ def run_starts(data: DiagnosisData, index: IntArray, step: int) -> IntArray:
     new = np.r_[True, (np.diff(index) != step) | gap]
     starts = np.flatnonzero(new)
     return np.asarray(starts[np.cumsum(new) - 1], dtype=np.intp)
+
+
+def forecast_noise(
+    noise: Sequence[AxisNoise],
+    residual_nt: FloatArray,
+    index: IntArray,
+    step: int,
+    targets: IntArray,
+) -> FloatArray:
+    """The noise models' forecast of the residual at the sample numbers ``targets`` (k, 3) [nT],
+    given the training residual ``residual_nt`` (m, 3) at the sample numbers ``index`` (a grid
+    ``step`` apart, the noise models' cadence), from the end of its last run.
+
+    A model with noise forecasts the noise as well as its columns (regression with ARIMA errors,
+    Box & Jenkins 1976, ch. 9): with innovations set to zero beyond the training span, the filter
+    ``a(L)`` gives ``r_t = -sum_(j>=1) a_j r_(t-j)``, started from the last run's deviations from
+    its mean (the mean added back: a unit root keeps a level whatever it is, a stationary part
+    decays to it). Under a random-walk offset the forecast is the level the training span ended
+    at, the level the model's calibration offsets cannot pin (the offsets' columns whitened by a
+    difference are zero); under white noise it is the residual's mean. A target is read at the
+    nearest grid position after the training span's last sample."""
+    index = np.asarray(index)
+    targets = np.asarray(targets)
+    out = np.zeros((targets.size, residual_nt.shape[1]))
+    if index.size == 0 or targets.size == 0:
+        return out
+    last = int(index[-1])
+    ahead = np.maximum(np.rint((targets - last) / max(step, 1)).astype(np.intp), 1)
+    horizon = int(ahead.max())
+    t = np.arange(index.size)
+    run_begin = int(np.flatnonzero(np.r_[True, np.diff(index) != step])[-1])
+    for i, nz in enumerate(noise):
+        a = nz.filter
+        lag = a.size - 1
+        r = np.asarray(residual_nt[:, i], dtype=float)
+        mean = float(np.mean(r))
+        hist = r[max(run_begin, t.size - lag) :] - mean
+        past = np.zeros(lag)
+        past[lag - hist.size :] = hist
+        if lag:  # the all-pole filter 1 / a(L) run on zero innovations from the past's state
+            state = lfiltic([1.0], a, past[::-1])
+            path = lfilter([1.0], a, np.zeros(horizon), zi=state)[0]
+        else:
+            path = np.zeros(horizon)
+        out[:, i] = mean + path[ahead - 1]
+    return out
