@@ -548,9 +548,12 @@ def model_diagnosis(
     # the chosen model's training residual with the events' own field left in it
     for e in beside:
         chosen_full[by_effect[e].cols] = 0.0
+    trained_apart = (
+        apply_model(data, index, forms, params[:12], chosen_full) if beside else trained_chosen
+    )
     events = judged_by_events(
         data,
-        (index, starts, step, apply_model(data, index, forms, params[:12], chosen_full)),
+        (index, starts, step, trained_apart),
         (h_index, h_starts, left, orbit),
         CATALOGUE,
         options,

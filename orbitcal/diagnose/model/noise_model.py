@@ -310,14 +310,13 @@ def forecast_noise(
     last = int(index[-1])
     ahead = np.maximum(np.rint((targets - last) / max(step, 1)).astype(np.intp), 1)
     horizon = int(ahead.max())
-    t = np.arange(index.size)
-    run_begin = int(np.flatnonzero(np.r_[True, np.diff(index) != step])[-1])
+    run_begin = int(runs_of_index(index, step)[-1])
     for i, nz in enumerate(noise):
         a = nz.filter
         lag = a.size - 1
         r = np.asarray(residual_nt[:, i], dtype=float)
         mean = float(np.mean(r))
-        hist = r[max(run_begin, t.size - lag) :] - mean
+        hist = r[max(run_begin, index.size - lag) :] - mean
         past = np.zeros(lag)
         past[lag - hist.size :] = hist
         if lag:  # the all-pole filter 1 / a(L) run on zero innovations from the past's state
