@@ -24,6 +24,14 @@ not decide: whitening under a persistent noise model hardly counts a level error
 was "closer" whitened), and beside a large unmodelled field (a 90 nT attitude walk) it called a
 torquer that took the block from 94.3 to 91.9 nT farther.
 
+Both errors are whitened once more by the base forecast's predictive covariance
+(:func:`predictive_rows`, :class:`BaseUncertainty`): under the base model its forecast error is the
+noise's innovations plus one draw of the training span's parameter error along the base model's
+columns on the block, which the noise model alone counts as hundreds of independent samples. On
+the storm pass at nadir (11 quiet minutes of training) a sun-driven field or a time offset that
+bent the calibration's extrapolation was confirmed at p 1e-18 to 1e-35 in 12 of 20 draws of
+tuning seed 6900; counted as the one draw it is, in 1.
+
 The shrink (RMS before over after) carries a moving-block bootstrap interval (Kuensch 1989):
 blocks of the final block's errors, before and after together, at least an orbit long so that
 what persists within an orbit (an unmodelled field along the track) stays within a block, drawn
@@ -48,11 +56,13 @@ __all__ = [
     "SHRINK_BOOTSTRAP_DRAWS",
     "SHRINK_INTERVAL_LEVEL",
     "SHRINK_MIN_BLOCKS",
+    "BaseUncertainty",
     "Confirmation",
     "andrews_bandwidth",
     "clark_west",
     "confirm",
     "newey_west_variance",
+    "predictive_rows",
     "shrink_interval",
     "whitened_rows",
 ]
@@ -214,16 +224,68 @@ def whitened_rows(e: FloatArray, noise: Sequence[AxisNoise], run_start: np.ndarr
     return out[valid]
 
 
+@dataclass(frozen=True)
+class BaseUncertainty:
+    """What the base forecast's own parameters leave uncertain on the final block: their
+    columns there and their posterior covariance from the training span.
+
+    Attributes
+    ----------
+    design : ndarray, shape (m, 3, p)
+        The base model's columns (the calibration's 12, then its effects') on the final block,
+        in the units of the parameters' covariance (the forecast is ``design @ params``).
+    cov : ndarray, shape (p, p)
+        The parameters' posterior covariance on the training span, under the noise model the
+        test whitens with.
+    """
+
+    design: FloatArray
+    cov: FloatArray
+
+
+def predictive_rows(w: FloatArray, z: FloatArray, cov: FloatArray) -> FloatArray:
+    """Whitened errors ``w`` (k, 3) whitened once more by the base forecast's predictive
+    covariance ``I + Z cov Z'`` (``z`` (k, 3, p) its whitened columns): ``(I + Z cov Z')^(-1/2) w``.
+
+    Under the base model the whitened forecast error is the noise's innovations **plus** the
+    error of the parameters estimated on the training span, ``Z (beta_hat - beta)``: one draw
+    for the whole block, along the directions the base model's columns take there. On a span
+    where the data hardly pin the calibration (a storm pass's 11 quiet minutes at nadir, whose
+    matrix elements the training span leaves at 100-1100 nT of posterior deviation) that error
+    is the forecast's largest part, and any candidate that bends the extrapolation forecast a
+    block of 360 samples "better" at p 1e-34. Whitened by the full predictive covariance, the
+    base error is again unit white noise under the base model, and an improvement along what
+    the base model's own uncertainty allows counts for what it is: one draw. Where the training
+    span pins the parameters (``Z' Z cov`` small: a day, a week) the rows hardly change."""
+    k = w.shape[0]
+    if k == 0 or cov.size == 0:
+        return w
+    zf = z.reshape(3 * k, -1)
+    vals, vecs = np.linalg.eigh(zf.T @ zf)  # Z = U S W': W = vecs, S^2 = vals
+    keep = vals > vals.max(initial=0.0) * 1e-12
+    if not np.any(keep):
+        return w
+    s, wv = np.sqrt(vals[keep]), vecs[:, keep]
+    lam, v = np.linalg.eigh((s[:, None] * (wv.T @ cov @ wv)) * s[None, :])
+    shrink = 1.0 / np.sqrt(1.0 + np.maximum(lam, 0.0)) - 1.0
+    # U = Z W S^-1; (I + U M U')^(-1/2) = I + U V diag(shrink) V' U'
+    a = (wv / s[None, :]) @ v
+    out = w.reshape(-1) + zf @ (a @ (shrink * (a.T @ (zf.T @ w.reshape(-1)))))
+    return out.reshape(k, 3)
+
+
 def confirm(
     e_base_nt: FloatArray,
     e_model_nt: FloatArray,
     noise: Sequence[AxisNoise],
     run_start: np.ndarray,
     block_samples: int = 0,
+    base: BaseUncertainty | None = None,
 ) -> Confirmation:
     """The confirmation from the forecast errors of the calibration alone and of the chosen
     model on the final block, (m, 3) each [nT] (identical arrays: the model is the calibration);
-    with ``block_samples`` (an orbit's samples), the shrink's bootstrap interval."""
+    with ``block_samples`` (an orbit's samples), the shrink's bootstrap interval; with ``base``,
+    the errors whitened by the base forecast's predictive covariance (:func:`predictive_rows`)."""
     before = float(np.sqrt(np.mean(e_base_nt**2)))
     after = float(np.sqrt(np.mean(e_model_nt**2)))
     n = int(e_base_nt.shape[0])
@@ -233,6 +295,9 @@ def confirm(
     blocks = block_samples if interval is not None else 0
     wb = whitened_rows(e_base_nt, noise, run_start)
     wm = whitened_rows(e_model_nt, noise, run_start)
+    if base is not None:
+        zb = whitened_rows(base.design, noise, run_start)
+        wb, wm = predictive_rows(wb, zb, base.cov), predictive_rows(wm, zb, base.cov)
     z, p, gain = clark_west(wb, wm)
     return Confirmation(before, after, p, z, n, gain, interval, blocks)
 

@@ -14,7 +14,7 @@ The driver names no effect: the catalogue gives each candidate's columns and pri
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -25,7 +25,7 @@ from orbitcal.diagnose.columns import JoinedColumns
 from orbitcal.diagnose.data import DiagnosisData
 from orbitcal.diagnose.design import DesignBlock
 from orbitcal.diagnose.effects import CATALOGUE, Effect
-from orbitcal.diagnose.model.confirm import Confirmation, confirm
+from orbitcal.diagnose.model.confirm import BaseUncertainty, Confirmation, confirm
 from orbitcal.diagnose.model.crossval import CrossValidation, cross_validated, orbital_period_s
 from orbitcal.diagnose.model.evidence import (
     Augmented,
@@ -42,6 +42,7 @@ from orbitcal.diagnose.model.gram import (
     Form,
     Gram,
     apply_model,
+    design_rows,
     group_prior,
     whitened_gram,
     whitened_grams,
@@ -533,16 +534,23 @@ def model_diagnosis(
 
     e_model = forecast_error(chosen)
     e_base = forecast_error(()) if chosen else e_model
+    base = _base_uncertainty(data, st, [by_effect[e] for e in chosen], test_noise, h_index)
     each = (
         {
-            e: confirm(forecast_error([c for c in chosen if c != e]), e_model, test_noise, h_starts)
+            e: confirm(
+                forecast_error([c for c in chosen if c != e]),
+                e_model,
+                test_noise,
+                h_starts,
+                base=base([c for c in chosen if c != e]),
+            )
             for e in chosen
         }
         if len(chosen) > 1
         else {}
     )
     orbit = _orbit_samples(data, h_index)
-    confirmation = confirm(e_base, e_model, test_noise, h_starts, orbit)
+    confirmation = confirm(e_base, e_model, test_noise, h_starts, orbit, base=base(()))
     # what the forecast confirmation names leaves; the events' own test is made on it
     left = e_model if chosen and confirmation.passes(options.confirmation_level) else e_base
     # the chosen model's training residual with the events' own field left in it
@@ -574,6 +582,35 @@ def model_diagnosis(
         noise_weights=tuple(float(w) for w in st.weights),
         crossval=crossval,
     )
+
+
+def _base_uncertainty(
+    data: DiagnosisData,
+    st: _Stage,
+    chosen: Sequence[Form],
+    noise: tuple[AxisNoise, ...],
+    h_index: IntArray,
+) -> Callable[[Sequence[str]], BaseUncertainty | None]:
+    """Per base model of the confirmation (the calibration with some of the ``chosen`` forms),
+    its columns on the final block and its parameters' posterior covariance on the training
+    span under the test's noise model (:func:`~orbitcal.diagnose.model.confirm.predictive_rows`):
+    one Gram matrix of the calibration and the chosen forms, each base model's block of it
+    inverted with its prior. None without a chosen form (no test is made)."""
+    if not chosen:
+        return lambda names: None
+    forms = _compact(chosen)
+    gram = whitened_gram(data, st.index, st.starts, forms, noise, skip=st.skip)
+    full = np.block([[gram.cc, gram.ce], [gram.ce.T, gram.ee]])
+    design = design_rows(data, h_index, forms)
+
+    def base(names: Sequence[str]) -> BaseUncertainty:
+        used = [f for f in forms if f.effect in names]
+        cols = np.r_[np.arange(12), *(12 + np.arange(f.cols.start, f.cols.stop) for f in used)]
+        sd = np.concatenate([np.full(12, CAL_PRIOR_SD_NT), *(f.prior_sd for f in used)])
+        precision = full[np.ix_(cols, cols)] + np.diag(1.0 / sd**2)
+        return BaseUncertainty(design[:, :, cols], np.linalg.pinv(precision, hermitian=True))
+
+    return base
 
 
 def _orbit_samples(data: DiagnosisData, index: IntArray) -> int:

@@ -30,6 +30,7 @@ __all__ = [
     "Form",
     "Gram",
     "apply_model",
+    "design_rows",
     "group_prior",
     "ranges_prior",
     "whitened_gram",
@@ -137,6 +138,21 @@ def _rows(
     for f in forms:
         eff[:, :, f.cols] = f.block.rows(part)
     return cal, eff
+
+
+def design_rows(data: DiagnosisData, index: IntArray, forms: Sequence[Form]) -> FloatArray:
+    """The columns of the calibration and of ``forms`` (numbered side by side from 0) at the
+    samples ``index``, (m, 3, 12 + width): axis ``i``'s calibration columns at ``4 i .. 4 i + 3``
+    as in the Gram matrix, the forms' after the 12."""
+    width = max((f.cols.stop for f in forms), default=0)
+    out = np.zeros((index.size, 3, 12 + width))
+    for a in range(0, index.size, CHUNK_SAMPLES):
+        part = index[a : a + CHUNK_SAMPLES]
+        cal, eff = _rows(data, part, forms, width)
+        for i in range(3):
+            out[a : a + part.size, i, 4 * i : 4 * i + 4] = cal
+        out[a : a + part.size, :, 12:] = eff
+    return out
 
 
 def _chunks(m: int, lag: int) -> list[tuple[int, int, int]]:
