@@ -27,10 +27,9 @@ torquer that took the block from 94.3 to 91.9 nT farther.
 Both errors are whitened once more by the base forecast's predictive covariance
 (:func:`predictive_rows`, :class:`BaseUncertainty`): under the base model its forecast error is the
 noise's innovations plus one draw of the training span's parameter error along the base model's
-columns on the block, which the noise model alone counts as hundreds of independent samples. On
-the storm pass at nadir (11 quiet minutes of training) a sun-driven field or a time offset that
-bent the calibration's extrapolation was confirmed at p 1e-18 to 1e-35 in 12 of 20 draws of
-tuning seed 6900; counted as the one draw it is, in 1.
+columns on the block, which the noise model alone counts as hundreds of independent samples: a
+candidate that only bends an ill-pinned calibration's extrapolation (a storm pass's 11 quiet
+minutes at nadir, ``docs/design.md``) was confirmed at p below 1e-17.
 
 The shrink (RMS before over after) carries a moving-block bootstrap interval (Kuensch 1989):
 blocks of the final block's errors, before and after together, at least an orbit long so that
@@ -231,15 +230,17 @@ class BaseUncertainty:
 
     Attributes
     ----------
-    design : ndarray, shape (m, 3, p)
+    whitened : ndarray, shape (k, 3, p)
         The base model's columns (the calibration's 12, then its effects') on the final block,
-        in the units of the parameters' covariance (the forecast is ``design @ params``).
+        in the units of the parameters' covariance (the forecast is ``columns @ params``),
+        whitened by the test's noise model as :func:`confirm` whitens the errors
+        (:func:`whitened_rows` with the same noise model and run starts: the same rows).
     cov : ndarray, shape (p, p)
         The parameters' posterior covariance on the training span, under the noise model the
         test whitens with.
     """
 
-    design: FloatArray
+    whitened: FloatArray
     cov: FloatArray
 
 
@@ -251,7 +252,7 @@ def predictive_rows(w: FloatArray, z: FloatArray, cov: FloatArray) -> FloatArray
     error of the parameters estimated on the training span, ``Z (beta_hat - beta)``: one draw
     for the whole block, along the directions the base model's columns take there. On a span
     where the data hardly pin the calibration (a storm pass's 11 quiet minutes at nadir, whose
-    matrix elements the training span leaves at 100-1100 nT of posterior deviation) that error
+    matrix elements the training span leaves at 90-1100 nT of posterior deviation) that error
     is the forecast's largest part, and any candidate that bends the extrapolation forecast a
     block of 360 samples "better" at p 1e-34. Whitened by the full predictive covariance, the
     base error is again unit white noise under the base model, and an improvement along what
@@ -296,8 +297,10 @@ def confirm(
     wb = whitened_rows(e_base_nt, noise, run_start)
     wm = whitened_rows(e_model_nt, noise, run_start)
     if base is not None:
-        zb = whitened_rows(base.design, noise, run_start)
-        wb, wm = predictive_rows(wb, zb, base.cov), predictive_rows(wm, zb, base.cov)
+        wb, wm = (
+            predictive_rows(wb, base.whitened, base.cov),
+            predictive_rows(wm, base.whitened, base.cov),
+        )
     z, p, gain = clark_west(wb, wm)
     return Confirmation(before, after, p, z, n, gain, interval, blocks)
 

@@ -25,7 +25,12 @@ from orbitcal.diagnose.columns import JoinedColumns
 from orbitcal.diagnose.data import DiagnosisData
 from orbitcal.diagnose.design import DesignBlock
 from orbitcal.diagnose.effects import CATALOGUE, Effect
-from orbitcal.diagnose.model.confirm import BaseUncertainty, Confirmation, confirm
+from orbitcal.diagnose.model.confirm import (
+    BaseUncertainty,
+    Confirmation,
+    confirm,
+    whitened_rows,
+)
 from orbitcal.diagnose.model.crossval import CrossValidation, cross_validated, orbital_period_s
 from orbitcal.diagnose.model.evidence import (
     Augmented,
@@ -534,7 +539,9 @@ def model_diagnosis(
 
     e_model = forecast_error(chosen)
     e_base = forecast_error(()) if chosen else e_model
-    base = _base_uncertainty(data, st, [by_effect[e] for e in chosen], test_noise, h_index)
+    base = _base_uncertainty(
+        data, st, [by_effect[e] for e in chosen], test_noise, (h_index, h_starts)
+    )
     each = (
         {
             e: confirm(
@@ -589,26 +596,29 @@ def _base_uncertainty(
     st: _Stage,
     chosen: Sequence[Form],
     noise: tuple[AxisNoise, ...],
-    h_index: IntArray,
+    final: tuple[IntArray, IntArray],
 ) -> Callable[[Sequence[str]], BaseUncertainty | None]:
     """Per base model of the confirmation (the calibration with some of the ``chosen`` forms),
-    its columns on the final block and its parameters' posterior covariance on the training
-    span under the test's noise model (:func:`~orbitcal.diagnose.model.confirm.predictive_rows`):
-    one Gram matrix of the calibration and the chosen forms, each base model's block of it
-    inverted with its prior. None without a chosen form (no test is made)."""
+    its columns on the final block (``final``: its samples and run starts), whitened once by the
+    test's noise model, and its parameters' posterior covariance on the training span under
+    that noise model (:func:`~orbitcal.diagnose.model.confirm.predictive_rows`): one Gram matrix
+    of the calibration and the chosen forms, each base model's block of it inverted with its
+    prior. None without a chosen form (no test is made)."""
     if not chosen:
         return lambda names: None
     forms = _compact(chosen)
-    gram = whitened_gram(data, st.index, st.starts, forms, noise, skip=st.skip)
-    full = np.block([[gram.cc, gram.ce], [gram.ce.T, gram.ee]])
-    design = design_rows(data, h_index, forms)
+    aug = _augmented(
+        whitened_gram(data, st.index, st.starts, forms, noise, skip=st.skip), st.cal_mean
+    )
+    h_index, h_starts = final
+    whitened = whitened_rows(design_rows(data, h_index, forms), noise, h_starts)
 
     def base(names: Sequence[str]) -> BaseUncertainty:
         used = [f for f in forms if f.effect in names]
         cols = np.r_[np.arange(12), *(12 + np.arange(f.cols.start, f.cols.stop) for f in used)]
-        sd = np.concatenate([np.full(12, CAL_PRIOR_SD_NT), *(f.prior_sd for f in used)])
-        precision = full[np.ix_(cols, cols)] + np.diag(1.0 / sd**2)
-        return BaseUncertainty(design[:, :, cols], np.linalg.pinv(precision, hermitian=True))
+        sd = np.concatenate([aug.cal_sd, *(f.prior_sd for f in used)])
+        precision = aug.g[np.ix_(cols, cols)] + np.diag(1.0 / sd**2)
+        return BaseUncertainty(whitened[:, :, cols], np.linalg.pinv(precision, hermitian=True))
 
     return base
 
