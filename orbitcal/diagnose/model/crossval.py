@@ -23,7 +23,7 @@ confirmation (:mod:`orbitcal.diagnose.model.confirm`) stays untouched.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -152,13 +152,19 @@ def cross_validated(
     skip: int,
     cal_mean: FloatArray,
     cal_sd: FloatArray,
+    outside: Callable[[IntArray], BoolArray] | None = None,
 ) -> CrossValidation:
     """Backward elimination of the chosen model's effects by their orbit-fold gain (see the
-    module). ``chosen``'s forms must have columns side by side from 0 (``core._compact``)."""
+    module). ``chosen``'s forms must have columns side by side from 0 (``core._compact``).
+    ``outside(index)``, when given, keeps the training samples it marks (the core's: those
+    outside the events of the effects fitted beside the chosen model, a field that no fold's
+    fit forecasts)."""
     from orbitcal.diagnose.blocked import estimation_samples
 
     names = tuple(f.effect for f in chosen)
     index = estimation_samples(train)
+    if outside is not None:
+        index = index[outside(index)]
     if not chosen or index.size < 2:
         return CrossValidation(0, kept=names)
     fold = orbit_folds(data.t_utc_s[index], orbital_period_s(data))

@@ -195,9 +195,15 @@ class Posterior:
 
     def median_model(self, cutoff: float = 0.5) -> tuple[str, ...]:
         """The effects whose inclusion probability is at least ``cutoff`` (0.5: the median
-        probability model, Barbieri & Berger 2004), most probable first."""
+        probability model, Barbieri & Berger 2004), most probable first. When those are more
+        effects than any model holds (four effects at 0.5 or more, each model of at most three
+        of them), the most probable model's effects instead: the choice is always a model."""
         inc = self.inclusion()
-        return tuple(sorted((e for e in self.effects if inc[e] >= cutoff), key=lambda e: -inc[e]))
+        chosen = [e for e in self.effects if inc[e] >= cutoff]
+        if len(chosen) > max((len(m) for m in self.models), default=0):
+            best = self.models[int(np.argmax(self.prob))]
+            chosen = [self.effects[i] for i in best]
+        return tuple(sorted(chosen, key=lambda e: -inc[e]))
 
 
 def posterior(
