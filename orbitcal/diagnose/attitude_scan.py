@@ -17,6 +17,7 @@ were missed on seeds 10400-10900 (`benchmarks/results/diagnose_independent.md`).
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 from collections.abc import Callable, Sequence
 from functools import partial
 
@@ -138,9 +139,23 @@ def design_attitude(
         size = min(max(size, _periods_alone(data, train)), max(by_size))
     best = by_size[size][1]
     chosen = _refine_periods(scan, best, ATTITUDE_REFINE_PASSES - 1)[0]
-    if not fixed:
-        _remember_alone(_alone_key(data, train), len(chosen))
-    return _attitude_block(data, train, chosen)
+    if fixed:
+        return _attitude_block(data, train, chosen)
+    _remember_alone(_alone_key(data, train), len(chosen))
+
+    def other_sizes() -> list[DesignBlock]:
+        # each other number of periods, refined as the chosen one: the model core chooses the
+        # number by evidence (the forward rule kept two of three sinusoids whose forecast then
+        # drifted out of phase, and the attitude error was withdrawn; docs/design.md)
+        return [
+            _attitude_block(
+                data, train, _refine_periods(scan, by_size[k][1], ATTITUDE_REFINE_PASSES - 1)[0]
+            )
+            for k in sorted(by_size)
+            if k != size
+        ]
+
+    return dataclasses.replace(_attitude_block(data, train, chosen), other_sizes=other_sizes)
 
 
 #: The number of periods the scan kept beside the calibration alone, per data set and training

@@ -84,6 +84,11 @@ class DesignBlock:
         How many forms a scan of the training data chose this one among (the attitude error's
         phase windows); the model core's posterior pays for the choice as for that many forms
         (:attr:`orbitcal.diagnose.model.gram.Form.n_forms`).
+    other_sizes : callable, optional
+        The forms of other numbers of terms than this one's, where a rule of the scan chose the
+        number (the attitude error's sinusoids: one to three periods, the number by a forward
+        forecast within the training span). The model core's posterior chooses among them and
+        this one by evidence, each paid for as one more form; the rules engine keeps this one.
     sensor_matrix : bool
         The regressors already hold the sensor's matrix (estimated with the form: a field of
         thousands of nT, :mod:`orbitcal.diagnose.orbit_shift`); the stated values are not
@@ -103,6 +108,7 @@ class DesignBlock:
     element_age_days: float | None = field(default=None, compare=False)
     sensor_matrix: bool = field(default=False, compare=False)
     forms_searched: int = field(default=1, compare=False)
+    other_sizes: Callable[[], Sequence[DesignBlock]] | None = field(default=None, compare=False)
 
     @property
     def n(self) -> int:

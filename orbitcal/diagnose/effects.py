@@ -242,15 +242,15 @@ _DESIGNS_LOCK = threading.Lock()
 
 
 def _owned(block: DesignBlock | None, effect: str) -> DesignBlock | None:
-    """``block`` marked as ``effect``'s, with its alternatives and the forms its refinement
-    makes (so that a joint fit asks that effect for the ranges of the block's parameters)."""
+    """``block`` marked as ``effect``'s, with its alternatives, the forms its refinement makes
+    and its other sizes (so that a joint fit asks that effect for the ranges of the block's
+    parameters)."""
     if block is None:
         return None
-    refine = block.refine
+    refine, sizes = block.refine, block.other_sizes
 
-    def refined() -> list[DesignBlock]:
-        assert refine is not None
-        return [b for b in (_owned(x, effect) for x in refine()) if b is not None]
+    def owned(make: Callable[[], Sequence[DesignBlock]]) -> Callable[[], list[DesignBlock]]:
+        return lambda: [b for b in (_owned(x, effect) for x in make()) if b is not None]
 
     return dataclasses.replace(
         block,
@@ -258,7 +258,8 @@ def _owned(block: DesignBlock | None, effect: str) -> DesignBlock | None:
         alternatives=tuple(
             b for b in (_owned(x, effect) for x in block.alternatives) if b is not None
         ),
-        refine=None if refine is None else refined,
+        refine=None if refine is None else owned(refine),
+        other_sizes=None if sizes is None else owned(sizes),
     )
 
 

@@ -14,6 +14,8 @@ The driver names no effect: the catalogue gives each candidate's columns and pri
 from __future__ import annotations
 
 import dataclasses
+import itertools
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -40,6 +42,7 @@ from orbitcal.diagnose.model.evidence import (
     averaged,
     form_evidence,
     log_evidence,
+    log_model_prior,
     model_evidence,
     posterior,
     project,
@@ -193,6 +196,8 @@ def candidate_forms(
     for eff in catalogue:
         block = eff.design(data, train)
         own = [] if block is None else [block, *block.alternatives]
+        if block is not None and block.other_sizes is not None:
+            own += block.other_sizes()
         further = eff.further_design(data, train)
         if further is not None and further.all_finite():
             own.append(further)
@@ -261,12 +266,10 @@ def _refined_forms(
 
     Each effect's best form is chosen alone (by evidence under unit noise), and the other
     effects' best forms are the search's company: the time is searched **beside them**
-    (:func:`_searched_beside`). Searched alone, a step was placed where it best took up the
-    other effects' fields (compound worlds 301 nos. 24 and 14: at 0.17 and 0.24 of the span
-    against steps at 0.29 and 0.31), and the misplaced drift forecast worse than none. Without
-    the refinement the model core chose among the grid's forms only: our simulator's 30 nT
-    step fell 350 s from the nearest of 17 grid times, the box it left was taken as noise, and
-    the drift got probability 0 with 18 nT left on the final block."""
+    (:func:`_searched_beside`): searched alone, a step was placed where it best took up the
+    other effects' fields, and the misplaced drift forecast worse than none. Without the
+    refinement the model core chose among the grid's forms only, and a step between two grid
+    times left a box taken as noise (``docs/design.md`` has the worlds and figures)."""
     unit = (_UNIT,) * 3
     apart = whitened_grams(data, index, starts, forms, [unit], forms_apart=True)[0]
     width = max((f.cols.stop for f in forms), default=0)
@@ -292,8 +295,9 @@ def _refined_forms(
         out.append(dataclasses.replace(current, n_forms=n_forms))
         # the effect's best form alone: the search's, or one of the forms it did not search
         plain = [f for f in forms if f.effect == best.effect and f.block.refine is None]
-        searched = whitened_grams(data, index, starts, _compact([current]), [unit])[0]
-        alone_ev = _evidence_or_inf(_augmented(searched, cal_mean), _compact([current])[0])
+        (current_alone,) = _compact([current])
+        searched = whitened_grams(data, index, starts, [current_alone], [unit])[0]
+        alone_ev = _evidence_or_inf(_augmented(searched, cal_mean), current_alone)
         rival = max(plain, key=lambda f: _evidence_or_inf(aug, f), default=None)
         if rival is not None and _evidence_or_inf(aug, rival) > alone_ev:
             bests.append(next(f for f in out if f.block is rival.block))
@@ -312,15 +316,22 @@ def _searched_beside(
     others: Sequence[Form],
     options: ModelOptions,
 ) -> tuple[Form, int]:
-    """One effect's form of greatest evidence (under unit noise) in the model of the
-    calibration, that form and the ``others`` (the other effects' best forms), and the number
-    of refinement forms tried. The rows are ``rows`` (the samples and their run starts).
+    """One effect's form of greatest evidence (under unit noise) beside the ``others`` (the
+    other effects' best forms), and the number of refinement forms tried. The rows are ``rows``
+    (the samples and their run starts).
+
+    A form's evidence is summed over the models the posterior weighs that hold it: the form
+    with none, one or more of the others (at most ``max_effects`` effects), each at its prior
+    (:func:`~orbitcal.diagnose.model.evidence.log_model_prior`) and paid for by their forms'
+    number. Beside all the others at once, an absent effect's flexible form (three sinusoids
+    of an attitude error and its drift) took up a step that it then stood in for, and the step
+    was placed where it fitted what they left (``docs/design.md``).
 
     The search starts from every local maximum of the evidence along the ``grid`` (in its
     order: the grid's times) and follows each by its refinements, the best of each in turn,
     until none is offered. A step's evidence is a narrow peak at its time: a grid time half a
     spacing away leaves a box of the step's height, and the grid's best can sit on a lesser
-    peak (compound world 22400 no. 44: the grid's best 0.25 of the span, the step at 0.50)."""
+    peak (``docs/design.md``)."""
     index, starts = rows
     others = _compact(others)
     base = others[-1].cols.stop if others else 0
@@ -334,12 +345,20 @@ def _searched_beside(
         aug = _augmented(gram, cal_mean)
         evidence = np.full(len(placed), -np.inf)
         for k, c in enumerate(placed):
-            try:
-                ev = model_evidence(aug, [*others, c])[0]
-            except np.linalg.LinAlgError:
-                continue
-            evidence[k] = ev if np.isfinite(ev) else -np.inf
+            terms = [_evidence_or_nan(aug, [*company, c]) + paid for company, paid in models]
+            evidence[k] = _log_sum_exp(terms)
         return evidence
+
+    n_catalogue = len(CATALOGUE)
+    models = [
+        (
+            company,
+            log_model_prior(len(company) + 1, options.expected_effects, n_catalogue)
+            - sum(math.log(f.n_forms) for f in company),
+        )
+        for size in range(min(options.max_effects - 1, len(others)) + 1)
+        for company in itertools.combinations(others, size)
+    ]
 
     def refined(form: Form) -> list[Form]:
         out = []
@@ -365,6 +384,24 @@ def _searched_beside(
             (paths if best[1].block.refine is not None else done).append(best)
             k += len(g)
     return max(done, key=lambda p: p[0])[1], tried
+
+
+def _evidence_or_nan(aug: Augmented, forms: Sequence[Form]) -> float:
+    """The evidence of the model of ``forms``; NaN for one that cannot be scored."""
+    try:
+        ev = model_evidence(aug, forms)[0]
+    except np.linalg.LinAlgError:
+        return math.nan
+    return float(ev) if np.isfinite(ev) else math.nan
+
+
+def _log_sum_exp(terms: Sequence[float]) -> float:
+    """``log sum exp`` of the finite ``terms`` (``-inf`` when none is)."""
+    values = np.asarray([t for t in terms if np.isfinite(t)], dtype=float)
+    if values.size == 0:
+        return -math.inf
+    top = float(values.max())
+    return top + math.log(float(np.sum(np.exp(values - top))))
 
 
 def _evidence_or_inf(aug: Augmented, form: Form) -> float:

@@ -206,6 +206,13 @@ class Posterior:
         return tuple(sorted(chosen, key=lambda e: -inc[e]))
 
 
+def log_model_prior(size: int, expected_effects: float, n_catalogue: int) -> float:
+    """The log prior of one model of ``size`` effects: each of the ``n_catalogue`` effects in
+    it independently at the rate ``expected_effects / n_catalogue``."""
+    pi = min(max(expected_effects / max(n_catalogue, 1), 1e-9), 1.0 - 1e-9)
+    return size * math.log(pi) + (n_catalogue - size) * math.log1p(-pi)
+
+
 def posterior(
     aug: Augmented,
     forms: Sequence[Form],
@@ -218,7 +225,6 @@ def posterior(
     per effect: the caller has chosen it). ``log_evidence`` holds each model's log prior plus
     log evidence, the Jacobian of whitening included."""
     k = len(forms)
-    pi = min(max(expected_effects / max(n_catalogue, 1), 1e-9), 1.0 - 1e-9)
     models: list[tuple[int, ...]] = []
     logs, thetas = [], []
     for size in range(min(max_effects, k) + 1):
@@ -226,7 +232,7 @@ def posterior(
             chosen = [forms[i] for i in model]
             log_m, theta = model_evidence(aug, chosen)
             log_m -= sum(math.log(f.n_forms) for f in chosen) + aug.log_scale
-            prior = size * math.log(pi) + (n_catalogue - size) * math.log1p(-pi)
+            prior = log_model_prior(size, expected_effects, n_catalogue)
             models.append(model)
             logs.append(log_m + prior)
             thetas.append(theta)
