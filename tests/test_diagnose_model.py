@@ -7,6 +7,7 @@ import dataclasses
 import itertools
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -177,6 +178,13 @@ def test_a_step_is_placed_beside_the_other_effects_fields(
     case = plan_compound_cases(50, seed=seed)[number]
     assert "parameter_drift" in case.effects
     world, data = simulate_compound_world(case, tle_text=real_tles_text)
+    md = _placed_step_diagnosis(world, data)
+    assert "parameter_drift" in model_named(md, ModelOptions())
+
+
+def _placed_step_diagnosis(world: Any, data: Any) -> ModelDiagnosis:
+    """The model core's diagnosis of a world with a drift, its step placed within a minute of
+    the injected one."""
     (truth,) = [e for e in world.effects if getattr(e, "name", "") == "parameter_drift"]
     t = data.t_utc_s
     step_s = t[0] + truth.step_at_fraction * (t[-1] - t[0])
@@ -185,7 +193,7 @@ def test_a_step_is_placed_beside_the_other_effects_fields(
     variant = md.forms["parameter_drift"]
     assert variant.startswith("step@"), variant
     assert abs(float(variant[5:].split("+")[0]) - step_s) < 60.0, (variant, step_s)
-    assert "parameter_drift" in model_named(md, ModelOptions())
+    return md
 
 
 @pytest.mark.parametrize("number", [152, 224])
@@ -207,14 +215,7 @@ def test_a_step_alone_is_not_searched_beside_an_absent_effects_form(
     world, data = bench._world_and_data(
         tle, start, attitude, effects, rng, n_orbits=4.0, cadence_s=10.0, crust_model="LCS-1"
     )
-    (truth,) = world.effects
-    t = data.t_utc_s
-    step_s = t[0] + truth.step_at_fraction * (t[-1] - t[0])
-    train, holdout = training_split(data)
-    md = model_diagnosis(data, train, holdout)
-    variant = md.forms["parameter_drift"]
-    assert variant.startswith("step@"), variant
-    assert abs(float(variant[5:].split("+")[0]) - step_s) < 60.0, (variant, step_s)
+    md = _placed_step_diagnosis(world, data)
     assert model_named(md, ModelOptions()) == ("parameter_drift",)
 
 
