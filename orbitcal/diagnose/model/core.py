@@ -40,9 +40,9 @@ from orbitcal.diagnose.model.evidence import (
     Projected,
     augment,
     averaged,
-    form_evidence,
     log_evidence,
     log_model_prior,
+    log_sum_exp,
     model_evidence,
     posterior,
     project,
@@ -298,8 +298,10 @@ def _refined_forms(
         (current_alone,) = _compact([current])
         searched = whitened_grams(data, index, starts, [current_alone], [unit])[0]
         alone_ev = _evidence_or_inf(_augmented(searched, cal_mean), current_alone)
-        rival = max(plain, key=lambda f: _evidence_or_inf(aug, f), default=None)
-        if rival is not None and _evidence_or_inf(aug, rival) > alone_ev:
+        rival_ev, rival = max(
+            ((_evidence_or_inf(aug, f), f) for f in plain), key=lambda p: p[0], default=(0.0, None)
+        )
+        if rival is not None and rival_ev > alone_ev:
             bests.append(next(f for f in out if f.block is rival.block))
         else:
             bests.append(out[-1])
@@ -345,8 +347,8 @@ def _searched_beside(
         aug = _augmented(gram, cal_mean)
         evidence = np.full(len(placed), -np.inf)
         for k, c in enumerate(placed):
-            terms = [_evidence_or_nan(aug, [*company, c]) + paid for company, paid in models]
-            evidence[k] = _log_sum_exp(terms)
+            terms = [_model_evidence_or_inf(aug, [*company, c]) + paid for company, paid in models]
+            evidence[k] = log_sum_exp(terms)
         return evidence
 
     n_catalogue = len(CATALOGUE)
@@ -386,31 +388,19 @@ def _searched_beside(
     return max(done, key=lambda p: p[0])[1], tried
 
 
-def _evidence_or_nan(aug: Augmented, forms: Sequence[Form]) -> float:
-    """The evidence of the model of ``forms``; NaN for one that cannot be scored."""
+def _model_evidence_or_inf(aug: Augmented, forms: Sequence[Form]) -> float:
+    """The evidence of the model of ``forms``; ``-inf`` for one that cannot be scored
+    (non-finite columns)."""
     try:
         ev = model_evidence(aug, forms)[0]
     except np.linalg.LinAlgError:
-        return math.nan
-    return float(ev) if np.isfinite(ev) else math.nan
-
-
-def _log_sum_exp(terms: Sequence[float]) -> float:
-    """``log sum exp`` of the finite ``terms`` (``-inf`` when none is)."""
-    values = np.asarray([t for t in terms if np.isfinite(t)], dtype=float)
-    if values.size == 0:
-        return -math.inf
-    top = float(values.max())
-    return top + math.log(float(np.sum(np.exp(values - top))))
+        return -np.inf
+    return float(ev) if np.isfinite(ev) else -np.inf
 
 
 def _evidence_or_inf(aug: Augmented, form: Form) -> float:
-    """A form's evidence alone; ``-inf`` for one that cannot be scored (non-finite columns)."""
-    try:
-        ev = form_evidence(aug, form)
-    except np.linalg.LinAlgError:
-        return -np.inf
-    return float(ev) if np.isfinite(ev) else -np.inf
+    """A form's evidence alone (:func:`_model_evidence_or_inf`)."""
+    return _model_evidence_or_inf(aug, [form])
 
 
 def _noise_candidates(

@@ -141,11 +141,6 @@ def model_evidence(aug: Augmented, forms: Sequence[Form]) -> tuple[float, FloatA
     return log_evidence(aug, cols.astype(np.intp), mean, sd)
 
 
-def form_evidence(aug: Augmented, form: Form) -> float:
-    """``log m`` of the model with this form alone."""
-    return model_evidence(aug, [form])[0]
-
-
 @dataclass(frozen=True)
 class Posterior:
     """The posterior over models of at most ``max_effects`` of the candidate effects.
@@ -242,10 +237,19 @@ def posterior(
     return Posterior(tuple(f.effect for f in forms), models, prob, log_post, thetas)
 
 
+def log_sum_exp(terms: Sequence[float] | FloatArray) -> float:
+    """``log sum exp`` of the finite ``terms`` (``-inf`` when none is)."""
+    values = np.asarray(terms, dtype=float)
+    values = values[np.isfinite(values)]
+    if values.size == 0:
+        return -math.inf
+    top = float(values.max())
+    return top + math.log(float(np.sum(np.exp(values - top))))
+
+
 def log_marginal(post: Posterior) -> float:
     """``log p(y)`` under the posterior's noise model: the log-sum of its models' terms."""
-    top = float(post.log_evidence.max())
-    return top + math.log(float(np.sum(np.exp(post.log_evidence - top))))
+    return log_sum_exp(post.log_evidence)
 
 
 def averaged(posts: Sequence[Posterior]) -> tuple[Posterior, FloatArray]:
